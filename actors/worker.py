@@ -1,0 +1,169 @@
+"""An env worker: runs env copies, acts epsilon-greedily with its latest weights, sends batches.
+
+The worker only knows three tiny seams (Acme style), so the same class runs inside a Ray actor
+over zenoh (``ZenohActorLinks``) and in-process in unit tests (``laneshift.deploy.inprocess``):
+
+- ``links.send_transitions(bytes)`` and ``links.send_episode(bytes)``;
+- ``links.latest_weights() -> bytes | None`` (newest unseen version, never blocks) and
+  ``links.wait_weights(timeout) -> bytes | None``;
+- ``links.wait_insert_ok()`` (blocks while the replay's rate limiter says the learner is behind);
+- ``links.stop_requested() -> bool``.
+
+Every ``send_every`` env steps it publishes one transitions batch (MATLAB: "workers send their
+experience every N steps"). In ``sync`` mode it then waits for the next weights version, so no
+step is ever taken with stale weights; in ``async`` mode it takes the newest version if one came.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+import torch
+
+from laneshift import wire
+from laneshift.config import ActorConfig, EnvConfig
+from laneshift.envspec import make_env
+from laneshift.learner.weights import tensors_digest
+
+from .exploration import make_schedule
+from .policy import QPolicy
+
+
+class ActorLinks(Protocol):
+    def send_transitions(self, payload: bytes) -> None: ...
+    def send_episode(self, payload: bytes) -> None: ...
+    def latest_weights(self) -> bytes | None: ...
+    def wait_weights(self, timeout: float) -> bytes | None: ...
+    def wait_insert_ok(self) -> None: ...
+    def stop_requested(self) -> bool: ...
+
+
+@dataclass
+class WorkerSummary:
+    name: str
+    env_steps: int
+    episodes: int
+    batches: int
+    versions_used: list[int]
+    weight_updates: int
+    bad_weights: int
+    first_weights_sha256: str  # digest of the first weights acted with (rehearsal: the phase-1 network)
+    wall_s: float
+
+    def as_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+class EnvWorker:
+    def __init__(self, name: str, index: int, env_cfg: EnvConfig, actor_cfg: ActorConfig,
+                 hidden: tuple[int, ...], sync: bool, rehearsal: bool):
+        torch.set_num_threads(actor_cfg.torch_threads)
+        self.name, self.index, self.cfg = name, index, actor_cfg
+        self.sync, self.rehearsal = sync, rehearsal
+        self.envs = [make_env(env_cfg) for _ in range(actor_cfg.envs_per_worker)]
+        space = self.envs[0].observation_space
+        self.policy = QPolicy(tuple(space.shape), int(self.envs[0].action_space.n), hidden,
+                              seed=actor_cfg.seed + 7919 * index)
+        self.epsilon = make_schedule(actor_cfg, index)
+        self.uses_policy_vehicles = env_cfg.policy_vehicles > 0
+        self.bad_weights = 0
+        self.weight_updates = 0
+        self.first_weights_sha256 = ""
+
+    # ------------------------------------------------------------------ weights
+
+    def _apply(self, payload: bytes | None) -> bool:
+        if payload is None:
+            return False
+        try:
+            weights = wire.decode_weights(payload)
+            if weights.version <= self.policy.version:
+                return False  # an older or repeated version (e.g. a query answer after an update)
+            self.policy.load(weights)
+            if not self.first_weights_sha256 and (not self.rehearsal or weights.phase == 2):
+                self.first_weights_sha256 = tensors_digest(weights.tensors)
+        except (wire.WireError, ValueError):
+            self.bad_weights += 1  # counted and ignored: keep acting with the weights we have
+            return False
+        self.weight_updates += 1
+        if self.uses_policy_vehicles:
+            for env in self.envs:  # other vehicles driven by a copy of the agent's current model
+                env.unwrapped.set_npc_policy(self.policy.greedy)
+        return True
+
+    def _await_weights(self, links: ActorLinks, newer_than: int, phase: int | None = None) -> bool:
+        """Block until a version > ``newer_than`` (and of ``phase``, if given) is loaded."""
+        while not links.stop_requested():
+            self._apply(links.wait_weights(0.5))
+            if self.policy.version > newer_than and (phase is None or self.policy.phase == phase):
+                return True
+        return False
+
+    # ------------------------------------------------------------------ acting
+
+    def run(self, links: ActorLinks, env_steps: int) -> WorkerSummary:
+        """Act for ``env_steps`` steps (over all env copies), then return a summary."""
+        started = time.monotonic()
+        # Rehearsal: phase 1 learns from demos alone, so workers start with the phase-2 network.
+        if not self._await_weights(links, -1, phase=2 if self.rehearsal else None):
+            return self._summary(0, 0, 0, [], started)
+        n_envs = len(self.envs)
+        obs = np.stack([env.reset(seed=self.cfg.seed + 1000 * self.index + j)[0] for j, env in enumerate(self.envs)])
+        ep_return, ep_len = np.zeros(n_envs), np.zeros(n_envs, np.int64)
+        steps = episodes = seq = 0
+        versions: list[int] = []
+        iters = max(1, -(-self.cfg.send_every // n_envs))
+        while steps < env_steps and not links.stop_requested():
+            if not self.sync:  # sync is paced by the learner's rounds already
+                links.wait_insert_ok()
+            rows: dict[str, list] = {k: [] for k in ("obs", "action", "reward", "next_obs", "terminated", "truncated")}
+            for _ in range(iters):
+                eps = self.epsilon(steps)
+                actions = self.policy.act(obs, eps)
+                for j, env in enumerate(self.envs):
+                    next_obs, reward, terminated, truncated, info = env.step(int(actions[j]))
+                    for k, v in (("obs", obs[j].copy()), ("action", actions[j]), ("reward", reward), ("next_obs", next_obs),
+                                 ("terminated", terminated), ("truncated", truncated)):
+                        rows[k].append(v)
+                    ep_return[j] += reward
+                    ep_len[j] += 1
+                    if terminated or truncated:
+                        episodes += 1
+                        links.send_episode(wire.encode_json({
+                            "actor": self.name, "return": float(ep_return[j]), "length": int(ep_len[j]),
+                            "crashed": bool(info.get("crashed", False)),
+                            "on_target_lane": bool(info.get("on_target_lane", False)),
+                            "weights_version": self.policy.version, "phase": self.policy.phase,
+                            "env_steps": steps + j + 1, "epsilon": float(eps)}))
+                        ep_return[j], ep_len[j] = 0.0, 0
+                        next_obs, _ = env.reset()
+                    obs[j] = next_obs
+                steps += n_envs
+                if steps >= env_steps:
+                    break
+            batch = wire.TransitionBatch.from_arrays(
+                actor=self.name, seq=seq, weights_version=self.policy.version, phase=self.policy.phase,
+                env_steps=steps, obs=np.stack(rows["obs"]), action=np.asarray(rows["action"]),
+                reward=np.asarray(rows["reward"], np.float32), next_obs=np.stack(rows["next_obs"]),
+                terminated=np.asarray(rows["terminated"]), truncated=np.asarray(rows["truncated"]))
+            links.send_transitions(wire.encode_transitions(batch))
+            versions.append(self.policy.version)
+            seq += 1
+            if self.sync and steps < env_steps:
+                # MATLAB sync: the host learns from every worker's batch, then sends new parameters to all.
+                if not self._await_weights(links, self.policy.version):
+                    break
+            else:
+                self._apply(links.latest_weights())
+        return self._summary(steps, episodes, seq, versions, started)
+
+    def _summary(self, steps: int, episodes: int, batches: int, versions: list[int], started: float) -> WorkerSummary:
+        return WorkerSummary(self.name, steps, episodes, batches, versions, self.weight_updates, self.bad_weights,
+                             self.first_weights_sha256, round(time.monotonic() - started, 3))
+
+    def close(self) -> None:
+        for env in self.envs:
+            env.close()

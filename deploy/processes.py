@@ -1,0 +1,79 @@
+"""Child processes of a local run: started with logs in the run dir, always reaped.
+
+    >>> group = ProcessGroup(Path("runs/x/logs"))  # doctest: +SKIP
+    >>> group.start("router", [sys.executable, "-m", "laneshift", "router", "--listen", ep])  # doctest: +SKIP
+    >>> group.stop_all()  # SIGTERM, then SIGKILL after a grace period  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+
+class ChildFailed(RuntimeError):
+    pass
+
+
+class ProcessGroup:
+    def __init__(self, log_dir: Path):
+        self.log_dir = Path(log_dir)
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        self.procs: dict[str, subprocess.Popen] = {}
+
+    def start(self, name: str, argv: list[str]) -> subprocess.Popen:
+        log = (self.log_dir / f"{name}.log").open("ab")
+        env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+        proc = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env)
+        log.close()
+        self.procs[name] = proc
+        return proc
+
+    def log_tail(self, name: str, lines: int = 15) -> str:
+        path = self.log_dir / f"{name}.log"
+        try:
+            return "\n".join(path.read_text(errors="replace").splitlines()[-lines:])
+        except OSError:
+            return ""
+
+    def check_alive(self, names: list[str] | None = None) -> None:
+        """Raise ChildFailed (with the end of its log) if a child exited."""
+        for name, proc in self.procs.items():
+            if (names is None or name in names) and proc.poll() is not None:
+                raise ChildFailed(f"{name} exited with code {proc.returncode}; end of {self.log_dir / name}.log:\n"
+                                  f"{self.log_tail(name)}")
+
+    def wait(self, name: str, timeout: float) -> int | None:
+        try:
+            return self.procs[name].wait(timeout)
+        except subprocess.TimeoutExpired:
+            return None
+
+    def stop(self, name: str, grace_s: float = 10.0) -> None:
+        proc = self.procs.get(name)
+        if proc is None or proc.poll() is not None:
+            return
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(grace_s)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(5)
+
+    def stop_all(self, grace_s: float = 10.0) -> None:
+        # Reverse start order: learner, then replay server, then the router they talk through.
+        for name in reversed(list(self.procs)):
+            self.stop(name, grace_s)
+
+
+def wait_for_file(path: Path, timeout_s: float, group: ProcessGroup, name: str) -> None:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if path.exists():
+            return
+        group.check_alive([name])
+        time.sleep(0.05)
+    raise ChildFailed(f"{name} did not become ready in {timeout_s:.0f} s; end of its log:\n{group.log_tail(name)}")

@@ -1,0 +1,1 @@
+"""laneshift package."""

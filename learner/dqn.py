@@ -1,0 +1,73 @@
+"""Double DQN (van Hasselt et al. 2016), CleanRL style: the update reads top to bottom.
+
+    >>> from laneshift.config import LearnerConfig
+    >>> agent = DoubleDQN((4,), 2, LearnerConfig(hidden=(16,), batch_size=8))
+    >>> import numpy as np
+    >>> b = dict(obs=np.zeros((8, 4), np.float32), action=np.zeros(8, np.int64), reward=np.ones(8, np.float32),
+    ...          next_obs=np.zeros((8, 4), np.float32), terminated=np.ones(8, np.uint8), weight=np.ones(8, np.float32))
+    >>> round(agent.update(b)["loss"], 3) > 0
+    True
+"""
+
+from __future__ import annotations
+
+import copy
+from typing import Mapping
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from laneshift.config import LearnerConfig
+
+from .networks import build_q_network
+
+
+class DoubleDQN:
+    def __init__(self, obs_shape: tuple[int, ...], n_actions: int, cfg: LearnerConfig):
+        torch.manual_seed(cfg.seed)
+        self.cfg = cfg
+        self.online = build_q_network(obs_shape, n_actions, cfg.hidden)
+        self.target = copy.deepcopy(self.online).requires_grad_(False)
+        self.updates = 0
+        self.reset_optimizer()
+
+    def reset_optimizer(self) -> None:
+        """Fresh Adam and target = online: the start of a new training run (rehearsal phase 2)."""
+        # Adam's coupled weight decay is plain L2 regularisation (MATLAB's L2RegularizationFactor).
+        self.optimizer = torch.optim.Adam(self.online.parameters(), lr=self.cfg.lr, weight_decay=self.cfg.weight_decay)
+        self.target.load_state_dict(self.online.state_dict())
+
+    def update(self, batch: Mapping[str, np.ndarray]) -> dict[str, float]:
+        obs = torch.as_tensor(batch["obs"])
+        action = torch.as_tensor(batch["action"], dtype=torch.int64)
+        reward = torch.as_tensor(batch["reward"], dtype=torch.float32)
+        next_obs = torch.as_tensor(batch["next_obs"])
+        not_done = 1.0 - torch.as_tensor(batch["terminated"], dtype=torch.float32)
+        weight = torch.as_tensor(batch.get("weight", np.ones(len(reward), np.float32)), dtype=torch.float32)
+
+        # Q(s, a) of the actions taken.
+        q = self.online(obs).gather(1, action[:, None]).squeeze(1)
+        with torch.no_grad():
+            # Double DQN: the online net picks the next action, the target net values it.
+            chooser = self.online if self.cfg.double else self.target
+            next_action = chooser(next_obs).argmax(dim=1, keepdim=True)
+            next_q = self.target(next_obs).gather(1, next_action).squeeze(1)
+            td_target = reward + self.cfg.gamma * not_done * next_q
+        td_error = q - td_target
+        loss = (weight * F.huber_loss(q, td_target, reduction="none", delta=self.cfg.huber_delta)).mean()
+
+        self.optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        grad_norm = torch.nn.utils.clip_grad_norm_(self.online.parameters(), self.cfg.grad_clip)
+        self.optimizer.step()
+
+        self.updates += 1
+        if self.updates % self.cfg.target_update_period == 0:
+            self.target.load_state_dict(self.online.state_dict())
+        return {"loss": float(loss.detach()), "q_mean": float(q.detach().mean()), "grad_norm": float(grad_norm),
+                "td_abs": float(td_error.detach().abs().mean())}
+
+    @torch.no_grad()
+    def greedy(self, obs: np.ndarray) -> np.ndarray:
+        return self.online(torch.as_tensor(obs)).argmax(dim=1).numpy()

@@ -1,0 +1,283 @@
+"""The learner process: pull batches, update Double DQN, broadcast weights.
+
+Cadence per parallel mode (MATLAB's parallel training options):
+
+- ``async``: learn from whatever the replay server has; every ``publish_every`` updates a new
+  weights version is broadcast and actors pick it up between their send batches.
+- ``sync``: wait until every worker delivered a batch made with the current version, do
+  ``updates_per_round`` updates, then broadcast the next version to all at once; workers wait.
+
+Rehearsal (the paper's 予行型): phase 1 runs ``phase1_updates`` updates on the demo shard alone
+(actors wait), saves ``checkpoints/phase1.safetensors``, switches the replay server to phase 2 and
+starts a new training run from that network (fresh optimizer, target = online).
+
+Run it with ``laneshift learner --config run.yaml``.
+"""
+
+from __future__ import annotations
+
+import collections
+import signal
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+import zenoh
+
+from laneshift import transport, wire
+from laneshift.config import RunConfig
+from laneshift.envspec import EnvSpec, env_spec
+
+from .dqn import DoubleDQN
+from .metrics import MetricsLog
+from .weights import save_checkpoint, to_wire
+
+
+def worker_names(n: int) -> list[str]:
+    """Actor names used in key expressions and stats: w0, w1, ..."""
+    return [f"w{i}" for i in range(n)]
+
+
+class ReplayClient:
+    """The learner's side of the replay server's queryables."""
+
+    def __init__(self, session: zenoh.Session, cfg: RunConfig, schema: wire.TransitionSchema):
+        self.session, self.schema = session, schema
+        self.run_id, self.timeout = cfg.transport.run_id, cfg.transport.timeout_s
+
+    def sample(self, req: wire.SampleRequest) -> wire.SampledBatch | wire.WireError | None:
+        reply = transport.query_ok(self.session, wire.sample_key(self.run_id), wire.encode_sample_request(req),
+                                   self.timeout)
+        if reply is None or isinstance(reply, wire.WireError):
+            return reply
+        return wire.decode_batch(reply, self.schema)
+
+    def stats(self) -> dict | None:
+        reply = transport.query(self.session, wire.replay_stats_key(self.run_id), b"", self.timeout)
+        return wire.decode_json(reply) if reply is not None else None
+
+    def control(self, body: dict) -> dict | None:
+        reply = transport.query(self.session, wire.replay_control_key(self.run_id), wire.encode_json(body),
+                                self.timeout)
+        return wire.decode_json(reply) if reply is not None else None
+
+
+class Learner:
+    def __init__(self, cfg: RunConfig, spec: EnvSpec, session: zenoh.Session, stop: threading.Event):
+        self.cfg, self.lcfg, self.spec = cfg, cfg.learner, spec
+        self.session, self.stop = session, stop
+        self.run_id = cfg.transport.run_id
+        self.run_dir = Path(cfg.train.run_dir)
+        self.agent = DoubleDQN(spec.schema.obs_shape, spec.schema.n_actions, cfg.learner)
+        self.replay = ReplayClient(session, cfg, spec.schema)
+        self.workers = worker_names(cfg.actor.workers)
+        self.metrics = MetricsLog(self.run_dir)
+        self.metrics.hparams(cfg.to_dict())
+        self.version = 0
+        self.phase = 1 if cfg.replay.demo_mode == "rehearsal" else 0
+        self._latest = b""
+        self._pub = transport.data_publisher(session, wire.weights_key(self.run_id))
+        transport.serve_queries(session, wire.weights_latest_key(self.run_id), lambda _: self._latest, stop,
+                                "weights-latest")
+        self._episodes: collections.deque[bytes] = collections.deque(maxlen=10_000)
+        self._ep_sub = session.declare_subscriber(wire.episodes_wildcard(self.run_id),
+                                                  lambda s: self._episodes.append(s.payload.to_bytes()))
+        self._control = transport.LatestValue(session, wire.control_key(self.run_id))
+        self._stats_pub = session.declare_publisher(wire.learner_stats_key(self.run_id))
+        # Running statistics for logs.
+        self.returns: collections.deque[float] = collections.deque(maxlen=100)
+        self.lengths: collections.deque[float] = collections.deque(maxlen=100)
+        self.crashes: collections.deque[float] = collections.deque(maxlen=100)
+        self.episodes = 0
+        self.actor_steps: dict[str, int] = {}
+        self.last_update: dict[str, float] = {}
+        self.replay_stats: dict = {}
+        self.started = time.monotonic()
+        self._updates_at_last_log, self._time_at_last_log = 0, time.monotonic()
+
+    # ------------------------------------------------------------------ weights
+
+    def publish(self) -> None:
+        self._latest = to_wire(self.agent.online, self.version, self.phase, self.agent.updates)
+        self._pub.put(self._latest)
+
+    def checkpoint(self, name: str = "latest") -> Path:
+        meta = {"version": self.version, "updates": self.agent.updates, "phase": self.phase,
+                "env_id": self.spec.env_id, "obs_shape": ",".join(map(str, self.spec.schema.obs_shape)),
+                "obs_dtype": self.spec.schema.obs_dtype, "n_actions": self.spec.schema.n_actions,
+                "hidden": ",".join(map(str, self.lcfg.hidden))}
+        return save_checkpoint(self.agent.online, self.run_dir / "checkpoints" / f"{name}.safetensors", meta)
+
+    # ------------------------------------------------------------------ main loop
+
+    def run(self) -> None:
+        self.publish()
+        print(f"learner: version 0 published; mode {self.cfg.replay.demo_mode}, parallel {self.cfg.train.parallel}, "
+              f"{sum(p.numel() for p in self.agent.online.parameters())} parameters", flush=True)
+        if self.phase == 1:
+            self._rehearsal_phase1()
+        next_log = time.monotonic()
+        while not self._should_stop():
+            if self.cfg.train.parallel == "sync":
+                self._sync_round()
+            else:
+                self._async_step()
+            if time.monotonic() >= next_log:
+                self._log()
+                next_log = time.monotonic() + 1.0
+        self._log()
+        self.checkpoint("latest")
+        self.checkpoint("final")
+        self._stats_pub.put(wire.encode_json({**self._status(), "done": True}))
+        self.metrics.close()
+        print(f"learner: stopped after {self.agent.updates} updates, version {self.version}", flush=True)
+
+    def _should_stop(self) -> bool:
+        data = self._control.take()
+        if data is not None:
+            try:
+                if wire.decode_json(data).get("cmd") == "stop":
+                    self.stop.set()
+            except wire.WireError:
+                pass
+        return self.stop.is_set()
+
+    def _updates(self, batch: wire.SampledBatch) -> None:
+        for part in _split(batch):
+            metrics = self.agent.update(part)
+            self.last_update = metrics
+            if self.agent.updates % self.lcfg.checkpoint_every == 0:
+                self.checkpoint("latest")
+
+    def _fetch(self, req: wire.SampleRequest) -> wire.SampledBatch | None:
+        """One sample request; on 'not ready' or no answer waits a little and returns None."""
+        result = self.replay.sample(req)
+        if isinstance(result, wire.SampledBatch):
+            return result
+        delay = getattr(result, "retry_after_ms", 0) / 1000 if result is not None else 0.1
+        self.stop.wait(max(delay, 0.001))
+        return None
+
+    def _rehearsal_phase1(self) -> None:
+        print(f"learner: rehearsal phase 1: {self.lcfg.phase1_updates} updates on demos only", flush=True)
+        next_log = time.monotonic()
+        while self.agent.updates < self.lcfg.phase1_updates and not self._should_stop():
+            n = min(self.lcfg.prefetch, self.lcfg.phase1_updates - self.agent.updates)
+            batch = self._fetch(wire.SampleRequest(self.lcfg.batch_size, n))
+            if batch is not None:
+                self._updates(batch)
+            if time.monotonic() >= next_log:
+                self._log()
+                next_log = time.monotonic() + 1.0
+        if self.stop.is_set():
+            return
+        self.checkpoint("phase1")
+        while (reply := self.replay.control({"cmd": "set_phase", "phase": 2})) is None or not reply.get("ok"):
+            if self.stop.wait(0.2):
+                return
+        # Phase 2: a new training run whose initial value is the phase-1 network.
+        self.agent.reset_optimizer()
+        self.phase, self.version = 2, self.version + 1
+        self.publish()
+        print(f"learner: rehearsal phase 2 from the phase-1 network (version {self.version})", flush=True)
+
+    def _async_step(self) -> None:
+        batch = self._fetch(wire.SampleRequest(self.lcfg.batch_size, self.lcfg.prefetch))
+        if batch is None:
+            return
+        before = self.agent.updates
+        self._updates(batch)
+        if self.agent.updates // self.lcfg.publish_every > before // self.lcfg.publish_every:
+            self.version += 1
+            self.publish()
+
+    def _sync_round(self) -> None:
+        # Wait until every worker delivered a batch made with the current version ...
+        req = wire.SampleRequest(self.lcfg.batch_size, self.lcfg.updates_per_round, min_version=self.version,
+                                 actors=tuple(self.workers))
+        result = self.replay.sample(req)
+        if isinstance(result, wire.WireError) and result.reason == "rate_limited":
+            pass  # ... before the replay holds enough to learn, the round just advances the version
+        elif not isinstance(result, wire.SampledBatch):
+            delay = getattr(result, "retry_after_ms", 0) / 1000 if result is not None else 0.1
+            self.stop.wait(max(delay, 0.001))
+            return
+        else:
+            self._updates(result)
+        # ... then send the new parameters to all workers at once.
+        self.version += 1
+        self.publish()
+
+    # ------------------------------------------------------------------ logging
+
+    def _drain_episodes(self) -> None:
+        while self._episodes:
+            try:
+                ep = wire.decode_json(self._episodes.popleft())
+                ret, length = float(ep["return"]), int(ep["length"])
+            except (wire.WireError, KeyError, TypeError, ValueError):
+                continue
+            self.episodes += 1
+            self.returns.append(ret)
+            self.lengths.append(length)
+            self.crashes.append(float(bool(ep.get("crashed", False))))
+            self.actor_steps[str(ep.get("actor"))] = int(ep.get("env_steps", 0))
+            self.metrics.scalars(self.episodes, {
+                "return": ret, "length": length, "crashed": float(bool(ep.get("crashed", False))),
+                "on_target_lane": float(bool(ep.get("on_target_lane", False))),
+                "epsilon": float(ep.get("epsilon", 0.0)),
+                "version_lag": float(self.version - int(ep.get("weights_version", 0)))}, kind="episode")
+
+    def _status(self) -> dict:
+        now = time.monotonic()
+        dt = max(now - self._time_at_last_log, 1e-6)
+        ups = (self.agent.updates - self._updates_at_last_log) / dt
+        self._updates_at_last_log, self._time_at_last_log = self.agent.updates, now
+        actors = self.replay_stats.get("actors", {})
+        env_steps = sum(int(a.get("env_steps", 0)) for a in actors.values())
+        return {
+            "updates": self.agent.updates, "updates_per_s": round(ups, 1), "version": self.version,
+            "phase": self.phase, "episodes": self.episodes, "env_steps": env_steps,
+            "return_mean": float(np.mean(self.returns)) if self.returns else None,
+            "length_mean": float(np.mean(self.lengths)) if self.lengths else None,
+            "crash_rate": float(np.mean(self.crashes)) if self.crashes else None,
+            "loss": self.last_update.get("loss"), "q_mean": self.last_update.get("q_mean"),
+            "replay_size": self.replay_stats.get("tables", {}).get("online", {}).get("size"),
+            "demo_share_samples": self.replay_stats.get("demo_share_recent_samples"),
+            "version_lag": {a: self.version - int(s.get("last_version", 0)) for a, s in actors.items()},
+            "elapsed_s": round(now - self.started, 1),
+        }
+
+    def _log(self) -> None:
+        self._drain_episodes()
+        stats = self.replay.stats()
+        if stats is not None:
+            self.replay_stats = stats
+        status = self._status()
+        self._stats_pub.put(wire.encode_json(status))
+        flat = {k: v for k, v in status.items() if isinstance(v, (int, float)) and v is not None}
+        flat.update({f"version_lag_{a}": lag for a, lag in status["version_lag"].items()})
+        if self.replay_stats:
+            flat["replay_demo_share_buffer"] = self.replay_stats.get("demo_share_buffer", 0.0)
+            flat.update({f"replay_{k}": v for k, v in self.replay_stats.get("rates", {}).items()})
+        self.metrics.scalars(self.agent.updates, flat)
+
+
+def _split(batch: wire.SampledBatch) -> list[dict[str, np.ndarray]]:
+    parts = {k: np.split(getattr(batch, k), batch.num_batches)
+             for k in ("obs", "action", "reward", "next_obs", "terminated", "weight")}
+    return [{k: v[i] for k, v in parts.items()} for i in range(batch.num_batches)]
+
+
+def run_learner(cfg: RunConfig) -> int:
+    """Learner process entry point: runs until a stop command, SIGINT or SIGTERM."""
+    torch.set_num_threads(cfg.learner.torch_threads)
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    spec = env_spec(cfg.env)
+    with transport.open_session(cfg.transport) as session:
+        Learner(cfg, spec, session, stop).run()
+    return 0

@@ -1,0 +1,30 @@
+"""Learner metrics: TensorBoard event files plus a JSON-lines log in the run dir."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+from tensorboardX import SummaryWriter
+
+
+class MetricsLog:
+    def __init__(self, run_dir: str | Path):
+        self.dir = Path(run_dir)
+        self.dir.mkdir(parents=True, exist_ok=True)
+        self.tb = SummaryWriter(str(self.dir / "tb"), flush_secs=5)
+        self._jsonl = (self.dir / "metrics.jsonl").open("a", buffering=1)
+
+    def scalars(self, step: int, values: dict[str, float], kind: str = "learner") -> None:
+        for k, v in values.items():
+            if isinstance(v, (int, float)):
+                self.tb.add_scalar(f"{kind}/{k}", v, step)
+        self._jsonl.write(json.dumps({"kind": kind, "step": step, "time": time.time(), **values}) + "\n")
+
+    def hparams(self, config: dict) -> None:
+        self.tb.add_text("config", "```\n" + json.dumps(config, indent=2) + "\n```", 0)
+
+    def close(self) -> None:
+        self.tb.close()
+        self._jsonl.close()

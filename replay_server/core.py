@@ -1,0 +1,288 @@
+"""The replay server's state and rules, free of any transport (zenoh lives in service.py).
+
+``ReplayCore`` ingests encoded transition batches, answers encoded sample requests and
+reports stats. It is thread-safe: the zenoh service calls it from its ingest and query
+threads, unit tests call it directly.
+
+The paper's three demo modes decide what is sampled:
+
+- ``none``: the online FIFO table only; the demo shard (if any) is held but not sampled.
+- ``retention``: ``round(demo_ratio * capacity)`` demo items are a fixed region of the buffer,
+  never evicted; the online FIFO gets the rest of the capacity; sampling is uniform over both,
+  so once the online part is full the demo share of batches equals ``demo_ratio``.
+- ``rehearsal``: phase 1 samples the whole demo shard only and stores no agent transitions;
+  after ``set_phase(2)`` (sent by the learner) it is ordinary replay on the online table.
+
+    >>> from laneshift.config import ReplayConfig
+    >>> from laneshift.wire import TransitionSchema
+    >>> core = ReplayCore(ReplayConfig(capacity=100, min_size=10), TransitionSchema((3,), "float32", 9))
+    >>> core.stats()["tables"]["online"]["size"]
+    0
+"""
+
+from __future__ import annotations
+
+import collections
+import threading
+import time
+from typing import Any
+
+import numpy as np
+
+from laneshift.config import ReplayConfig
+from laneshift.wire import (SampledBatch, SampleRequest, TransitionSchema, WireError, decode_sample_request,
+                            decode_transitions, encode_batch, encode_error)
+
+from .rate_limiter import SampleToInsertRatio
+from .storage import DemoTable, RingTable
+
+MAX_ACTORS = 4096
+
+
+class ReplayCore:
+    def __init__(self, cfg: ReplayConfig, schema: TransitionSchema, demo: DemoTable | None = None):
+        self.cfg = cfg
+        self.schema = schema
+        self._rng = np.random.default_rng(cfg.seed)
+        self._lock = threading.Lock()
+        self.mode = cfg.demo_mode
+        held = demo if demo is not None else DemoTable.empty(schema.obs_shape, schema.obs_dtype)
+        self.demo_held = held  # everything loaded, for stats and inspection
+        online_capacity = cfg.capacity
+        if self.mode == "retention":
+            want = round(cfg.demo_ratio * cfg.capacity)
+            if held.size < want:
+                raise ValueError(
+                    f"replay.demo_ratio: retention needs {want} demo transitions ({cfg.demo_ratio:.0%} of "
+                    f"replay.capacity {cfg.capacity}) but the demo shard has {held.size}; record more demos "
+                    f"or lower replay.capacity to {int(held.size / cfg.demo_ratio)}")
+            # A fixed, seeded subset fills the demo region; it never changes during the run.
+            rows = np.sort(self._rng.choice(held.size, size=want, replace=False))
+            self.demo = held.subset(rows)
+            online_capacity = cfg.capacity - want
+        elif self.mode == "rehearsal":
+            if held.size == 0:
+                raise ValueError("replay.demo_paths: rehearsal phase 1 learns from demos only, but none were loaded")
+            self.demo = held
+        else:
+            self.demo = DemoTable.empty(schema.obs_shape, schema.obs_dtype)
+        self.phase = 1 if self.mode == "rehearsal" else 0
+        self.online = RingTable(online_capacity, schema.obs_shape, schema.obs_dtype)
+        self.limiter = SampleToInsertRatio(cfg.samples_per_insert, cfg.min_size, online_capacity,
+                                           cfg.spi_tolerance)
+        self.started = time.monotonic()
+        # Counters (all guarded by _lock).
+        self.rejected: collections.Counter[str] = collections.Counter()
+        self.dropped: collections.Counter[str] = collections.Counter()
+        self.actors: dict[str, dict[str, int]] = {}
+        self._actor_index: dict[str, int] = {}
+        self.samples = 0  # rows sampled while the rate limiter applies
+        self.sampled_rows = 0
+        self.sampled_demo_rows = 0
+        self.requests = collections.Counter()
+        self._recent = collections.deque(maxlen=200)  # (rows, demo rows) of recent requests
+        self._rates = _RateMeter()
+
+    # ------------------------------------------------------------------ ingest
+
+    def ingest(self, payload: bytes | bytearray | memoryview, actor_key: str | None = None) -> str | None:
+        """Validate and store one transitions message. Returns None, or the reason it was refused.
+
+        Never raises on bad input: a malformed message is counted by reason and dropped, and it
+        is fully validated before anything is written, so no partial item can be stored.
+        """
+        try:
+            batch = decode_transitions(payload, self.schema)
+        except WireError as exc:
+            return self._reject(exc.reason)
+        except Exception:  # noqa: BLE001 - a decoder bug must not take the server down
+            return self._reject("decode_failed")
+        if actor_key is not None and actor_key != batch.actor:
+            return self._reject("actor_mismatch")
+        with self._lock:
+            stats = self.actors.get(batch.actor)
+            if stats is None:
+                if len(self.actors) >= MAX_ACTORS:
+                    self.rejected["too_many_actors"] += 1
+                    return "too_many_actors"
+                self._actor_index[batch.actor] = len(self._actor_index)
+                stats = self.actors[batch.actor] = {"batches": 0, "items": 0, "stored": 0, "last_seq": -1,
+                                                    "lost_batches": 0, "last_version": -1, "env_steps": 0}
+            if batch.seq > stats["last_seq"] + 1 and stats["last_seq"] >= 0:
+                stats["lost_batches"] += batch.seq - stats["last_seq"] - 1  # seq gap: messages lost in transit
+            stats["last_seq"] = max(stats["last_seq"], batch.seq)
+            stats["batches"] += 1
+            stats["items"] += len(batch)
+            stats["last_version"] = max(stats["last_version"], batch.weights_version)
+            stats["env_steps"] = max(stats["env_steps"], batch.env_steps)
+            if self.mode == "rehearsal" and (self.phase == 1 or batch.phase == 1):
+                # Paper: in phase 1 the agent's own transitions are not stored.
+                self.dropped["rehearsal_phase1"] += len(batch)
+                return None
+            self.online.insert(batch, self._actor_index[batch.actor])
+            stats["stored"] += len(batch)
+            self._rates.add("inserts", len(batch))
+        return None
+
+    def _reject(self, reason: str) -> str:
+        with self._lock:
+            self.rejected[reason] += 1
+        return reason
+
+    # ------------------------------------------------------------------ sampling
+
+    def sample(self, req: SampleRequest) -> SampledBatch | WireError:
+        """Draw ``req.num_batches * req.batch_size`` rows, or say why not (rate limited, not ready)."""
+        rows = req.batch_size * req.num_batches
+        try:
+            self.limiter.check_request(rows)
+        except ValueError as exc:
+            return _retry("request_too_large", str(exc), 0)
+        with self._lock:
+            if req.min_version >= 0:
+                behind = [a for a in req.actors if self.actors.get(a, {}).get("last_version", -1) < req.min_version]
+                if behind:
+                    self.requests["not_ready"] += 1
+                    return _retry("not_ready", f"waiting for {behind} to deliver version {req.min_version}", 2)
+            demo_only = self.phase == 1
+            if demo_only:
+                n_demo, n_online = self.demo.size, 0
+            else:
+                if not self.limiter.can_sample(size=self.online.size, inserts=self.online.inserted,
+                                               samples=self.samples, rows=rows):
+                    self.requests["rate_limited"] += 1
+                    return _retry("rate_limited", f"online size {self.online.size}, min {self.limiter.min_size}", 5)
+                n_demo = self.demo.size if self.mode == "retention" else 0
+                n_online = self.online.size
+            pick = self._rng.integers(0, n_demo + n_online, size=rows)
+            is_demo = pick < n_demo
+            demo_rows = pick[is_demo]
+            online_rows = pick[~is_demo] - n_demo
+            batch = self._gather(is_demo, demo_rows, online_rows, req.num_batches)
+            if not demo_only:
+                self.samples += rows
+            self.sampled_rows += rows
+            self.sampled_demo_rows += int(is_demo.sum())
+            self._recent.append((rows, int(is_demo.sum())))
+            self.requests["served"] += 1
+            self._rates.add("samples", rows)
+        return batch
+
+    def _gather(self, is_demo: np.ndarray, demo_rows: np.ndarray, online_rows: np.ndarray, nb: int) -> SampledBatch:
+        n = is_demo.shape[0]
+        out = {
+            "obs": np.empty((n, *self.schema.obs_shape), self.schema.obs_dtype),
+            "next_obs": np.empty((n, *self.schema.obs_shape), self.schema.obs_dtype),
+            "action": np.empty(n, np.int64), "reward": np.empty(n, np.float32), "terminated": np.empty(n, np.uint8),
+        }
+        d, o = is_demo, ~is_demo
+        for name in out:
+            out[name][d] = getattr(self.demo, name)[demo_rows]
+            out[name][o] = getattr(self.online, name)[online_rows]
+        index = np.empty(n, np.int64)
+        index[d] = demo_rows
+        # Online keys: the newest insertion counter that maps to each ring row.
+        last = self.online.inserted - 1
+        index[o] = last - ((last - online_rows) % self.online.capacity)
+        return SampledBatch(is_demo=is_demo.astype(np.uint8), index=index, weight=np.ones(n, np.float32),
+                            num_batches=nb, info={"phase": self.phase}, **out)
+
+    def handle_sample_query(self, payload: bytes | bytearray | memoryview) -> bytes:
+        """Bytes in, bytes out: what the zenoh queryable replies."""
+        try:
+            req = decode_sample_request(payload)
+        except WireError as exc:
+            self._reject("bad_request:" + exc.reason)
+            return encode_error("bad_request", exc.detail)
+        result = self.sample(req)
+        if isinstance(result, WireError):
+            return encode_error(result.reason, result.detail, getattr(result, "retry_after_ms", 0))
+        return encode_batch(result)
+
+    # ------------------------------------------------------------------ control and stats
+
+    def set_phase(self, phase: int) -> None:
+        if self.mode != "rehearsal" or phase not in (1, 2):
+            raise ValueError(f"phase {phase} is not valid in demo_mode {self.mode}")
+        with self._lock:
+            if phase < self.phase:
+                raise ValueError("rehearsal phases only move forward")
+            self.phase = phase
+
+    def insert_allowed(self) -> bool:
+        """False while the learner is too far behind the ratio (actors wait; see rate_limiter)."""
+        with self._lock:
+            if self.phase == 1:
+                return True
+            return self.limiter.can_insert(inserts=self.online.inserted, samples=self.samples)
+
+    def handle_control(self, body: dict[str, Any]) -> dict[str, Any]:
+        cmd = body.get("cmd")
+        try:
+            if cmd == "set_phase":
+                self.set_phase(int(body.get("phase", 0)))
+                return {"ok": True, "phase": self.phase}
+            if cmd == "stats":
+                return {"ok": True, "stats": self.stats()}
+        except (TypeError, ValueError) as exc:
+            return {"ok": False, "error": str(exc)}
+        return {"ok": False, "error": f"unknown command {cmd!r}"}
+
+    def stats(self) -> dict[str, Any]:
+        with self._lock:
+            online_size = self.online.size
+            demo_in_buffer = self.demo.size
+            total = online_size + (demo_in_buffer if self.mode == "retention" or self.phase == 1 else 0)
+            recent_rows = sum(r for r, _ in self._recent)
+            recent_demo = sum(d for _, d in self._recent)
+            return {
+                "mode": self.mode,
+                "phase": self.phase,
+                "uptime_s": round(time.monotonic() - self.started, 3),
+                "tables": {
+                    "online": {"size": online_size, "capacity": self.online.capacity, "inserted": self.online.inserted,
+                               "bytes": self.online.nbytes},
+                    "demo": {"size": self.demo.size, "held": self.demo_held.size, "sha256": self.demo_held.sha256,
+                             "bytes": self.demo_held.nbytes},
+                },
+                "demo_share_buffer": (demo_in_buffer / total) if total and self.mode != "none" else 0.0,
+                "demo_share_recent_samples": recent_demo / recent_rows if recent_rows else 0.0,
+                "sampled_rows": self.sampled_rows,
+                "sampled_demo_rows": self.sampled_demo_rows,
+                "requests": dict(self.requests),
+                "rejected": dict(self.rejected),
+                "dropped": dict(self.dropped),
+                "actors": {k: dict(v) for k, v in self.actors.items()},
+                "rates": self._rates.rates(),
+                "rate_limiter": self.limiter.state(size=online_size, inserts=self.online.inserted,
+                                                   samples=self.samples),
+            }
+
+
+def _retry(reason: str, detail: str, retry_ms: int) -> WireError:
+    err = WireError(reason, detail)
+    err.retry_after_ms = retry_ms  # type: ignore[attr-defined]
+    return err
+
+
+class _RateMeter:
+    """Events per second over a sliding window of a few seconds."""
+
+    def __init__(self, window_s: float = 5.0):
+        self.window_s = window_s
+        self.events: dict[str, collections.deque] = collections.defaultdict(collections.deque)
+
+    def add(self, name: str, count: int) -> None:
+        now = time.monotonic()
+        q = self.events[name]
+        q.append((now, count))
+        while q and q[0][0] < now - self.window_s:
+            q.popleft()
+
+    def rates(self) -> dict[str, float]:
+        now = time.monotonic()
+        out = {}
+        for name, q in self.events.items():
+            recent = [c for t, c in q if t >= now - self.window_s]
+            out[f"{name}_per_s"] = round(sum(recent) / self.window_s, 1)
+        return out

@@ -1,0 +1,48 @@
+"""``laneshift replay inspect``: the replay server's stats as a readable table."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+from laneshift import transport, wire
+from laneshift.config import TransportConfig
+
+
+def render(stats: dict) -> str:
+    t = stats["tables"]
+    lines = [
+        f"mode {stats['mode']}  phase {stats['phase']}  uptime {stats['uptime_s']:.0f} s",
+        f"{'table':<8}{'size':>10}{'capacity':>10}{'inserted':>12}{'MiB':>8}",
+        f"{'online':<8}{t['online']['size']:>10,}{t['online']['capacity']:>10,}{t['online']['inserted']:>12,}"
+        f"{t['online']['bytes'] / 2**20:>8.1f}",
+        f"{'demo':<8}{t['demo']['size']:>10,}{t['demo']['held']:>10,}{'-':>12}{t['demo']['bytes'] / 2**20:>8.1f}"
+        f"  sha256 {t['demo']['sha256'][:16] or '-'}",
+        f"demo share: buffer {stats['demo_share_buffer']:.3f}, recent samples {stats['demo_share_recent_samples']:.3f}",
+        f"rates: {', '.join(f'{k} {v:,.0f}' for k, v in stats['rates'].items()) or '-'}",
+        f"requests: {stats['requests'] or '-'}   rejected: {stats['rejected'] or '-'}   dropped: {stats['dropped'] or '-'}",
+        f"{'actor':<10}{'batches':>9}{'items':>10}{'stored':>10}{'lost':>6}{'version':>9}{'env steps':>11}",
+    ]
+    for name, a in sorted(stats["actors"].items()):
+        lines.append(f"{name:<10}{a['batches']:>9,}{a['items']:>10,}{a['stored']:>10,}{a['lost_batches']:>6}"
+                     f"{a['last_version']:>9}{a['env_steps']:>11,}")
+    return "\n".join(lines)
+
+
+def inspect_main(args: argparse.Namespace) -> int:
+    cfg = TransportConfig(router=args.router, run_id=args.run_id)
+    with transport.open_session(cfg) as session:
+        while True:
+            reply = transport.query(session, wire.replay_stats_key(cfg.run_id), b"", cfg.timeout_s)
+            if reply is None:
+                print(f"no replay server answered on {wire.replay_stats_key(cfg.run_id)} via {cfg.router}")
+                if not args.watch:
+                    return 1
+            else:
+                stats = wire.decode_json(reply)
+                print(json.dumps(stats, indent=2) if args.json else render(stats), flush=True)
+            if not args.watch:
+                return 0
+            time.sleep(args.interval)
+            print()

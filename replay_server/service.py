@@ -1,0 +1,130 @@
+"""The replay server process: ReplayCore behind zenoh.
+
+- subscribes to ``laneshift/<run>/transitions/*``; a FIFO channel feeds one ingest thread, so
+  a slow server back-pressures publishers (they use BLOCK) instead of losing data;
+- answers ``.../replay/sample`` (SampleRequest -> BATCH or ERROR), ``.../replay/stats`` (JSON)
+  and ``.../replay/control`` (JSON commands such as ``{"cmd": "set_phase", "phase": 2}``).
+
+Run it with ``laneshift replay-server --config run.yaml``.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+
+import zenoh
+
+from laneshift import transport, wire
+from laneshift.config import RunConfig
+
+from .core import ReplayCore
+from .demo_loading import load_demo_table
+
+
+class ReplayService:
+    """Wires a ReplayCore to a zenoh session. ``start()`` returns at once; ``stop()`` joins."""
+
+    def __init__(self, core: ReplayCore, session: zenoh.Session, run_id: str):
+        self.core = core
+        self.session = session
+        self.run_id = run_id
+        self.stop_event = threading.Event()
+        self._threads: list[threading.Thread] = []
+
+    def start(self) -> "ReplayService":
+        sub = self.session.declare_subscriber(wire.transitions_wildcard(self.run_id), zenoh.handlers.FifoChannel(1024))
+        ingest = threading.Thread(target=self._ingest_loop, args=(sub,), name="replay-ingest", daemon=True)
+        ingest.start()
+        self._threads.append(ingest)
+        flow = threading.Thread(target=self._flow_loop, name="replay-flow", daemon=True)
+        flow.start()
+        self._threads.append(flow)
+        q = transport.serve_queries
+        self._threads += [
+            q(self.session, wire.sample_key(self.run_id), self.core.handle_sample_query, self.stop_event, "replay-sample"),
+            q(self.session, wire.replay_stats_key(self.run_id), lambda _: wire.encode_json(self.core.stats()),
+              self.stop_event, "replay-stats"),
+            q(self.session, wire.replay_control_key(self.run_id), self._control, self.stop_event, "replay-control"),
+        ]
+        return self
+
+    def _ingest_loop(self, sub: zenoh.Subscriber) -> None:
+        while not self.stop_event.is_set():
+            try:
+                sample = sub.recv()
+            except Exception:  # noqa: BLE001 - channel closed with the session
+                return
+            try:
+                actor = wire.actor_from_transitions_key(str(sample.key_expr))
+            except ValueError:
+                self.core._reject("bad_key")
+                continue
+            self.core.ingest(sample.payload.to_bytes(), actor)
+
+    def _flow_loop(self, period_s: float = 0.01, heartbeat_s: float = 0.25) -> None:
+        """Tell actors whether they may insert: on every change, and as a heartbeat."""
+        pub = self.session.declare_publisher(wire.replay_flow_key(self.run_id))
+        last, last_sent = None, 0.0
+        while not self.stop_event.wait(period_s):
+            ok = self.core.insert_allowed()
+            now = time.monotonic()
+            if ok != last or now - last_sent >= heartbeat_s:
+                pub.put(wire.encode_json({"insert_ok": ok}))
+                last, last_sent = ok, now
+
+    def _control(self, payload: bytes) -> bytes:
+        try:
+            body = wire.decode_json(payload)
+        except wire.WireError as exc:
+            return wire.encode_json({"ok": False, "error": str(exc)})
+        return wire.encode_json(self.core.handle_control(body))
+
+    def stop(self) -> None:
+        self.stop_event.set()
+
+
+def build_core(cfg: RunConfig) -> ReplayCore:
+    """The replay core for a run: schema from the env, demo shards validated against it."""
+    from laneshift.envspec import env_spec
+
+    spec = env_spec(cfg.env)
+    demo = load_demo_table(cfg.replay.demo_paths, spec) if cfg.replay.demo_paths else None
+    return ReplayCore(cfg.replay, spec.schema, demo)
+
+
+def run_replay_server(cfg: RunConfig, *, embedded_router: bool = False, ready_file: str | None = None) -> int:
+    """Serve until SIGINT/SIGTERM. Writes ``ready_file`` (JSON) once it is serving."""
+    try:
+        core = build_core(cfg)
+    except ValueError as exc:  # config or shard mismatch: refuse to start, naming the problem
+        print(f"replay-server: {exc}", file=sys.stderr)
+        return 2
+    demo_digest = core.demo.digest()
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    mode = "router" if embedded_router else "client"
+    with transport.open_session(cfg.transport, mode=mode) as session:
+        service = ReplayService(core, session, cfg.transport.run_id).start()
+        stats = core.stats()
+        print(f"replay-server: serving run {cfg.transport.run_id!r} on {cfg.transport.router} "
+              f"(mode {core.mode}, online capacity {core.online.capacity}, demo items {core.demo.size}, "
+              f"demo sha256 {stats['tables']['demo']['sha256'][:12] or '-'})", flush=True)
+        if ready_file:
+            Path(ready_file).write_text(json.dumps({"pid": __import__("os").getpid(), "time": time.time()}))
+        while not stop.wait(0.5):
+            pass
+        service.stop()
+    final = core.stats()
+    final["demo_digest_start"], final["demo_digest_end"] = demo_digest, core.demo.digest()
+    out = Path(cfg.train.run_dir) / "replay_stats.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(final, indent=2))
+    print(f"replay-server: stopped; stored {final['tables']['online']['inserted']} items, "
+          f"rejected {sum(final['rejected'].values())}", flush=True)
+    return 0

@@ -1,0 +1,112 @@
+"""Preallocated numpy tables: the online FIFO ring and the fixed demo table.
+
+Memory is allocated once at start (``capacity`` rows), so it stays bounded whatever the
+actors' or the learner's speed; inserting is a vectorised copy with wrap-around.
+
+    >>> t = RingTable(4, obs_shape=(2,), obs_dtype="float32")
+    >>> t.size
+    0
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from laneshift.wire import TransitionBatch
+
+
+class RingTable:
+    """FIFO ring of transitions. Item keys are global insertion counters (monotone)."""
+
+    def __init__(self, capacity: int, obs_shape: tuple[int, ...], obs_dtype: str):
+        self.capacity = int(capacity)
+        self.obs = np.zeros((self.capacity, *obs_shape), dtype=obs_dtype)
+        self.next_obs = np.zeros_like(self.obs)
+        self.action = np.zeros(self.capacity, np.int64)
+        self.reward = np.zeros(self.capacity, np.float32)
+        self.terminated = np.zeros(self.capacity, np.uint8)
+        self.truncated = np.zeros(self.capacity, np.uint8)
+        self.actor = np.zeros(self.capacity, np.int16)  # index into the server's actor list
+        self.version = np.zeros(self.capacity, np.int32)  # weights version that acted
+        self.inserted = 0  # total items ever inserted (the next item's key)
+
+    @property
+    def size(self) -> int:
+        return min(self.inserted, self.capacity)
+
+    @property
+    def nbytes(self) -> int:
+        return sum(a.nbytes for a in (self.obs, self.next_obs, self.action, self.reward, self.terminated,
+                                      self.truncated, self.actor, self.version))
+
+    def insert(self, batch: TransitionBatch, actor_index: int) -> np.ndarray:
+        """Store a validated batch; returns the keys of the items stored."""
+        n = len(batch)
+        skip = max(0, n - self.capacity)  # a batch larger than the table keeps its newest rows
+        keys = np.arange(self.inserted + skip, self.inserted + n, dtype=np.int64)
+        rows = keys % self.capacity
+        self.obs[rows] = batch.obs[skip:]
+        self.next_obs[rows] = batch.next_obs[skip:]
+        self.action[rows] = batch.action[skip:]
+        self.reward[rows] = batch.reward[skip:]
+        self.terminated[rows] = batch.terminated[skip:]
+        self.truncated[rows] = batch.truncated[skip:]
+        self.actor[rows] = actor_index
+        self.version[rows] = batch.weights_version
+        self.inserted += n
+        return keys
+
+    def rows_of(self, keys: np.ndarray) -> np.ndarray:
+        return keys % self.capacity
+
+    def valid(self, keys: np.ndarray) -> np.ndarray:
+        """Which keys still refer to stored (not yet evicted) items."""
+        return (keys >= self.inserted - self.size) & (keys < self.inserted)
+
+    def live_keys(self) -> np.ndarray:
+        return np.arange(self.inserted - self.size, self.inserted, dtype=np.int64)
+
+
+@dataclass
+class DemoTable:
+    """The demo shard's transitions, loaded once and never evicted or modified."""
+
+    obs: np.ndarray
+    action: np.ndarray
+    reward: np.ndarray
+    next_obs: np.ndarray
+    terminated: np.ndarray
+    sha256: str
+    metadata: dict
+
+    def __post_init__(self) -> None:
+        for arr in (self.obs, self.action, self.reward, self.next_obs, self.terminated):
+            arr.flags.writeable = False  # a bug elsewhere must not be able to corrupt the demos
+
+    @property
+    def size(self) -> int:
+        return int(self.action.shape[0])
+
+    @property
+    def nbytes(self) -> int:
+        return sum(a.nbytes for a in (self.obs, self.action, self.reward, self.next_obs, self.terminated))
+
+    def digest(self) -> str:
+        """sha256 over the table's arrays as held in memory (to prove nothing was changed)."""
+        import hashlib
+
+        h = hashlib.sha256()
+        for arr in (self.obs, self.action, self.reward, self.next_obs, self.terminated):
+            h.update(np.ascontiguousarray(arr).tobytes())
+        return h.hexdigest()
+
+    def subset(self, rows: np.ndarray) -> "DemoTable":
+        return DemoTable(self.obs[rows], self.action[rows], self.reward[rows], self.next_obs[rows],
+                         self.terminated[rows], self.sha256, self.metadata)
+
+    @classmethod
+    def empty(cls, obs_shape: tuple[int, ...], obs_dtype: str) -> "DemoTable":
+        z = np.zeros((0, *obs_shape), obs_dtype)
+        return cls(z, np.zeros(0, np.int64), np.zeros(0, np.float32), z.copy(), np.zeros(0, np.uint8), "", {})

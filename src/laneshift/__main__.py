@@ -1,0 +1,5 @@
+"""``python -m laneshift`` is the ``laneshift`` command."""
+
+from .cli import main
+
+raise SystemExit(main())

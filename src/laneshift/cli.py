@@ -1,0 +1,185 @@
+"""The ``laneshift`` command. ``laneshift --help`` lists the subcommands.
+
+    laneshift train --local --workers 2 --scenario straight --mode rehearsal --env-steps 20000 --run-dir runs/demo
+    laneshift replay-server --config runs/demo/config.yaml
+    laneshift learner --config runs/demo/config.yaml
+    laneshift demos generate --scenario straight --episodes 50 --out demos/straight
+    laneshift eval --checkpoint runs/demo/checkpoints/final.safetensors --scenario straight --episodes 200
+    laneshift replay inspect --router tcp/127.0.0.1:7447 --run-id run
+    laneshift bench env
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Any
+
+from .config import ConfigError, RunConfig, load_run_config
+
+
+def _add_config_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", help="YAML/TOML/JSON file with sections env, actor, replay, learner, transport, train")
+    p.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
+                   help="override any config field, e.g. --set learner.lr=1e-4 (repeatable)")
+
+
+def _config_from(args: argparse.Namespace, shortcuts: dict[str, Any] | None = None) -> RunConfig:
+    overrides: dict[str, Any] = {k: v for k, v in (shortcuts or {}).items() if v is not None}
+    for item in args.set:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise ConfigError(f"--set {item!r}: write SECTION.FIELD=VALUE")
+        overrides[key.strip()] = value
+    return load_run_config(args.config, overrides)
+
+
+# ---------------------------------------------------------------------------- train
+
+
+def _train(args: argparse.Namespace) -> int:
+    cfg = _config_from(args, {
+        "actor.workers": args.workers, "env.scenario": args.scenario, "replay.demo_mode": args.mode,
+        "train.env_steps": args.env_steps, "train.run_dir": args.run_dir, "train.parallel": args.parallel,
+        "env.observation": args.observation, "replay.demo_paths": args.demos, "transport.run_id": args.run_id})
+    if args.cluster:
+        from laneshift.deploy.cluster import train_cluster
+
+        return train_cluster(cfg, address=args.cluster)
+    from laneshift.deploy.local import train_local
+
+    return train_local(cfg)
+
+
+def _add_train(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("train", help="train: local single-machine mode or on a Ray cluster")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--local", action="store_true", help="everything on this machine (the default)")
+    where.add_argument("--cluster", metavar="ADDRESS", help="a running Ray cluster, e.g. ray://head:10001 or auto")
+    p.add_argument("--workers", type=int, help="env workers (Ray actors)")
+    p.add_argument("--scenario", help="straight | merge | curve | roundabout | lka")
+    p.add_argument("--mode", choices=["none", "retention", "rehearsal"], help="how demos are used (paper)")
+    p.add_argument("--parallel", choices=["async", "sync"], help="MATLAB parallel training mode")
+    p.add_argument("--env-steps", help="total env-step budget over all workers")
+    p.add_argument("--observation", choices=["vector", "grayscale"])
+    p.add_argument("--demos", help="demo shard dir(s), comma separated (default: scripted, generated if absent)")
+    p.add_argument("--run-dir", help="where checkpoints, logs, TensorBoard files and config go")
+    p.add_argument("--run-id", help="zenoh key namespace (laneshift/<run-id>/...)")
+    _add_config_args(p)
+    p.set_defaults(func=_train)
+
+
+# ---------------------------------------------------------------------------- services
+
+
+def _replay_server(args: argparse.Namespace) -> int:
+    from laneshift.replay_server.service import run_replay_server
+
+    return run_replay_server(_config_from(args), embedded_router=args.embedded_router, ready_file=args.ready_file)
+
+
+def _learner(args: argparse.Namespace) -> int:
+    from laneshift.learner.loop import run_learner
+
+    return run_learner(_config_from(args))
+
+
+def _router(args: argparse.Namespace) -> int:
+    from laneshift.deploy.router import run_router
+
+    return run_router(args.listen)
+
+
+def _add_services(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("replay-server", help="run the replay server process")
+    _add_config_args(p)
+    p.add_argument("--embedded-router", action="store_true", help="be the zenoh router too (listen on transport.router)")
+    p.add_argument("--ready-file", help="write this file once serving (used by the launcher)")
+    p.set_defaults(func=_replay_server)
+    p = sub.add_parser("learner", help="run the learner process")
+    _add_config_args(p)
+    p.set_defaults(func=_learner)
+    p = sub.add_parser("router", help="run a zenoh router for the other processes")
+    p.add_argument("--listen", default="tcp/127.0.0.1:7447", help="zenoh endpoint to listen on")
+    p.set_defaults(func=_router)
+
+
+# ---------------------------------------------------------------------------- eval and inspect
+
+
+def _eval(args: argparse.Namespace) -> int:
+    from laneshift.evaluate import evaluate_checkpoint, format_result
+
+    cfg = _config_from(args, {"env.scenario": args.scenario, "env.initial_lane": args.initial_lane,
+                              "env.max_steps": args.max_steps, "env.observation": args.observation})
+    result = evaluate_checkpoint(args.checkpoint, cfg.env, episodes=args.episodes, seed=args.seed)
+    print(json.dumps(result) if args.json else format_result(result))
+    return 0
+
+
+def _replay_inspect(args: argparse.Namespace) -> int:
+    from laneshift.replay_server.inspect import inspect_main
+
+    return inspect_main(args)
+
+
+def _add_inspection(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("eval", help="greedy evaluation of a checkpoint (survival / achievement rates)")
+    p.add_argument("--checkpoint", required=True)
+    p.add_argument("--scenario")
+    p.add_argument("--episodes", type=int, default=100)
+    p.add_argument("--initial-lane", choices=["random", "non-target"])
+    p.add_argument("--max-steps", type=int, help="episode length (paper evaluation: 300)")
+    p.add_argument("--observation", choices=["vector", "grayscale"])
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--json", action="store_true")
+    _add_config_args(p)
+    p.set_defaults(func=_eval)
+    p = sub.add_parser("replay", help="talk to a running replay server")
+    rsub = p.add_subparsers(dest="replay_cmd", required=True)
+    q = rsub.add_parser("inspect", help="print the replay server's stats")
+    q.add_argument("--router", default="tcp/127.0.0.1:7447", help="zenoh router endpoint")
+    q.add_argument("--run-id", default="run")
+    q.add_argument("--watch", action="store_true", help="refresh every --interval seconds")
+    q.add_argument("--interval", type=float, default=2.0)
+    q.add_argument("--json", action="store_true")
+    q.set_defaults(func=_replay_inspect)
+
+
+# ---------------------------------------------------------------------------- wiring
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="laneshift", description=__doc__.split("\n")[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    _add_train(sub)
+    _add_services(sub)
+    _add_inspection(sub)
+    demos = sub.add_parser("demos", help="human/scripted demonstrations: record, generate, inspect")
+    from laneshift.demos.cli import register as register_demos
+
+    register_demos(demos.add_subparsers(dest="demos_cmd", required=True, metavar="ACTION"))
+    bench = sub.add_parser("bench", help="benchmarks (env speed, replay throughput)")
+    bench_sub = bench.add_subparsers(dest="bench_cmd", required=True, metavar="WHAT")
+    from laneshift.bench_env import register as register_bench_env
+
+    register_bench_env(bench_sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except ConfigError as exc:
+        print(f"laneshift: bad configuration: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,358 @@
+"""One flat, frozen dataclass per component, and the loader that builds them.
+
+Each component receives only its own config. ``RunConfig`` just groups them so a run can be
+saved and loaded as one YAML/TOML file with one section per component::
+
+    env:     {scenario: straight, observation: vector}
+    replay:  {capacity: 100000, demo_mode: rehearsal}
+    learner: {lr: 0.0005}
+
+A bad value is refused with a ``ConfigError`` naming the field, e.g.
+``replay.demo_ratio: must be in (0, 1), got 1.5``.
+
+    >>> cfg = load_run_config(overrides={"env.scenario": "lka", "actor.workers": "2"})
+    >>> cfg.actor.workers
+    2
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import tomllib
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import yaml
+
+SCENARIO_NAMES = ("straight", "merge", "curve", "roundabout", "lka")
+
+
+class ConfigError(ValueError):
+    """A configuration value or file was refused; the message names the field."""
+
+
+def _check(cond: bool, where: str, msg: str, value: Any) -> None:
+    if not cond:
+        raise ConfigError(f"{where}: {msg}, got {value!r}")
+
+
+@dataclass(frozen=True)
+class EnvConfig:
+    """Which environment every actor runs (the env's own kwargs, flat)."""
+
+    scenario: str = "straight"  # straight | merge | curve | roundabout | lka, or a full gymnasium id
+    observation: str = "vector"  # vector (fast, CPU default) | grayscale (paper: 4 x 100 x 100)
+    reward_preset: int = 5  # Table 1 condition (lane-change scenarios only)
+    max_steps: int = 0  # 0 = the scenario's default episode length
+    initial_lane: str = "random"  # random | non-target
+    action_set: str = "paper"  # paper (9 actions) | meta (highway-env meta-actions)
+    policy_vehicles: int = 0  # other vehicles driven by a copy of the agent's policy
+
+    def __post_init__(self) -> None:
+        _check(self.scenario in SCENARIO_NAMES or "/" in self.scenario, "env.scenario",
+               f"must be one of {SCENARIO_NAMES} or a gymnasium id", self.scenario)
+        _check(self.observation in ("vector", "grayscale"), "env.observation", "must be vector or grayscale",
+               self.observation)
+        _check(1 <= self.reward_preset <= 5, "env.reward_preset", "must be 1..5 (Table 1)", self.reward_preset)
+        _check(self.max_steps >= 0, "env.max_steps", "must be >= 0", self.max_steps)
+        _check(self.initial_lane in ("random", "non-target"), "env.initial_lane", "must be random or non-target",
+               self.initial_lane)
+        _check(self.action_set in ("paper", "meta"), "env.action_set", "must be paper or meta", self.action_set)
+        _check(self.policy_vehicles >= 0, "env.policy_vehicles", "must be >= 0", self.policy_vehicles)
+
+    @property
+    def is_lka(self) -> bool:
+        return self.scenario in ("lka", "laneshift/LaneKeepingAssist-v0")
+
+    def env_kwargs(self) -> dict[str, Any]:
+        """Keyword arguments for ``make_env`` (LKA takes none of the lane-change options)."""
+        if self.is_lka:
+            return {"max_steps": self.max_steps} if self.max_steps else {}
+        kw: dict[str, Any] = {"observation": self.observation, "reward_preset": self.reward_preset,
+                              "initial_lane": self.initial_lane, "action_set": self.action_set}
+        if self.max_steps:
+            kw["max_steps"] = self.max_steps
+        if self.policy_vehicles:
+            kw["policy_vehicles"] = self.policy_vehicles
+        return kw
+
+
+@dataclass(frozen=True)
+class ActorConfig:
+    """Env workers (Ray actors): how many, how they explore, how often they send."""
+
+    workers: int = 2
+    envs_per_worker: int = 1
+    send_every: int = 32  # publish a transitions batch every K env steps (MATLAB: "every N steps")
+    exploration: str = "linear"  # linear (paper) | exponential (MATLAB) | apex (per-actor fixed epsilons)
+    epsilon_start: float = 1.0
+    epsilon_final: float = 0.1  # paper condition 5: 1.0 -> 0.1
+    epsilon_decay_steps: int = 20_000  # linear: env steps (per worker) from start to final
+    epsilon_decay_rate: float = 1e-4  # exponential: eps *= (1 - rate) per step (MATLAB EpsilonDecay)
+    apex_epsilon: float = 0.4  # apex: eps_i = apex_epsilon ** (1 + apex_alpha * i / (N - 1))
+    apex_alpha: float = 7.0
+    weights_poll_s: float = 0.0  # async: 0 = pick up the newest weights between send batches
+    torch_threads: int = 1
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        _check(self.workers >= 1, "actor.workers", "must be >= 1", self.workers)
+        _check(self.envs_per_worker >= 1, "actor.envs_per_worker", "must be >= 1", self.envs_per_worker)
+        _check(self.send_every >= 1, "actor.send_every", "must be >= 1", self.send_every)
+        _check(self.exploration in ("linear", "exponential", "apex"), "actor.exploration",
+               "must be linear, exponential or apex", self.exploration)
+        for name in ("epsilon_start", "epsilon_final", "apex_epsilon"):
+            v = getattr(self, name)
+            _check(0.0 <= v <= 1.0, f"actor.{name}", "must be in [0, 1]", v)
+        _check(self.epsilon_decay_steps >= 1, "actor.epsilon_decay_steps", "must be >= 1", self.epsilon_decay_steps)
+        _check(0.0 <= self.epsilon_decay_rate < 1.0, "actor.epsilon_decay_rate", "must be in [0, 1)",
+               self.epsilon_decay_rate)
+        _check(self.torch_threads >= 1, "actor.torch_threads", "must be >= 1", self.torch_threads)
+
+
+@dataclass(frozen=True)
+class ReplayConfig:
+    """The replay server: tables, demo mode and rate limiting."""
+
+    capacity: int = 100_000  # total items, demo region included (retention)
+    demo_mode: str = "none"  # none | retention | rehearsal (the paper's three)
+    demo_ratio: float = 0.1  # retention: share of the buffer that is demos, never evicted
+    demo_paths: tuple[str, ...] = ()  # demo shards (Minari datasets) loaded at start
+    min_size: int = 1_000  # online items needed before sampling (not in rehearsal phase 1)
+    # Reverb-style SampleToInsertRatio: sampled rows per inserted item (0 = no ratio). With batch
+    # 256, 32 means one update per 8 env steps; actors wait when the learner falls behind.
+    samples_per_insert: float = 32.0
+    spi_tolerance: float = 8192.0  # rows of slack either side of the ratio (>= one sample request)
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        _check(self.capacity >= 2, "replay.capacity", "must be >= 2", self.capacity)
+        _check(self.demo_mode in ("none", "retention", "rehearsal"), "replay.demo_mode",
+               "must be none, retention or rehearsal", self.demo_mode)
+        _check(0.0 < self.demo_ratio < 1.0, "replay.demo_ratio", "must be in (0, 1)", self.demo_ratio)
+        _check(self.min_size >= 1, "replay.min_size", "must be >= 1", self.min_size)
+        _check(self.min_size <= self.capacity, "replay.min_size", f"must be <= replay.capacity ({self.capacity}) "
+               "or sampling could never start", self.min_size)
+        _check(self.samples_per_insert >= 0, "replay.samples_per_insert", "must be >= 0", self.samples_per_insert)
+        _check(self.spi_tolerance >= 0, "replay.spi_tolerance", "must be >= 0", self.spi_tolerance)
+        if self.demo_mode != "none":
+            _check(len(self.demo_paths) > 0, "replay.demo_paths", f"demo_mode {self.demo_mode} needs a demo shard",
+                   self.demo_paths)
+
+
+@dataclass(frozen=True)
+class LearnerConfig:
+    """Double DQN hyperparameters (all of them, CleanRL style) and the learner's cadence."""
+
+    lr: float = 5e-4
+    gamma: float = 0.99
+    batch_size: int = 256  # MATLAB minibatch 256
+    hidden: tuple[int, ...] = (256, 256)  # MLP for vector observations (CNN for grayscale)
+    target_update_period: int = 500  # updates between hard target-network syncs
+    huber_delta: float = 1.0
+    grad_clip: float = 10.0  # global-norm gradient clipping (MATLAB threshold: 1)
+    weight_decay: float = 0.0  # L2 regularisation (MATLAB: 1e-4)
+    double: bool = True  # Double DQN target; False = vanilla DQN (for comparison)
+    publish_every: int = 50  # updates between weight broadcasts (async)
+    updates_per_round: int = 8  # sync: updates per round of worker batches
+    phase1_updates: int = 2_000  # rehearsal: demo-only updates before phase 2
+    checkpoint_every: int = 5_000  # updates between checkpoints in the run dir
+    prefetch: int = 4  # batches per sample request (one round trip, several updates)
+    torch_threads: int = 1
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        _check(self.lr > 0, "learner.lr", "must be > 0", self.lr)
+        _check(0.0 <= self.gamma <= 1.0, "learner.gamma", "must be in [0, 1]", self.gamma)
+        _check(1 <= self.batch_size <= 8192, "learner.batch_size", "must be 1..8192", self.batch_size)
+        _check(len(self.hidden) >= 1 and all(h >= 1 for h in self.hidden), "learner.hidden",
+               "must be a non-empty list of positive sizes", self.hidden)
+        for name in ("target_update_period", "publish_every", "updates_per_round", "phase1_updates",
+                     "checkpoint_every", "prefetch", "torch_threads"):
+            _check(getattr(self, name) >= 1, f"learner.{name}", "must be >= 1", getattr(self, name))
+        _check(self.prefetch <= 64, "learner.prefetch", "must be <= 64", self.prefetch)
+        _check(self.huber_delta > 0, "learner.huber_delta", "must be > 0", self.huber_delta)
+        _check(self.grad_clip > 0, "learner.grad_clip", "must be > 0", self.grad_clip)
+        _check(self.weight_decay >= 0, "learner.weight_decay", "must be >= 0", self.weight_decay)
+
+
+@dataclass(frozen=True)
+class TransportConfig:
+    """zenoh: every process is a client of one router (measured: peers behind a router get nothing)."""
+
+    router: str = "tcp/127.0.0.1:7447"  # the endpoint clients connect to and the router listens on
+    run_id: str = "run"  # namespace in every key expression: laneshift/<run_id>/...
+    timeout_s: float = 5.0  # query timeout
+
+    def __post_init__(self) -> None:
+        _check(self.router.startswith(("tcp/", "udp/", "unixsock-stream/")), "transport.router",
+               "must be a zenoh endpoint like tcp/127.0.0.1:7447", self.router)
+        from .wire import _NAME  # the same rule as key expressions
+
+        _check(bool(_NAME.match(self.run_id)), "transport.run_id", "must match [A-Za-z0-9_-]{1,64}", self.run_id)
+        _check(self.timeout_s > 0, "transport.timeout_s", "must be > 0", self.timeout_s)
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """The run as a whole: budget, parallel mode and where things go."""
+
+    env_steps: int = 20_000  # total env steps over all workers (after rehearsal phase 1)
+    parallel: str = "async"  # async | sync (MATLAB parallel training modes)
+    run_dir: str = "runs/latest"
+    log_every_s: float = 2.0
+    eval_episodes: int = 10  # greedy episodes in the final summary (0 = skip)
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        _check(self.env_steps >= 1, "train.env_steps", "must be >= 1", self.env_steps)
+        _check(self.parallel in ("async", "sync"), "train.parallel", "must be async or sync", self.parallel)
+        _check(self.log_every_s > 0, "train.log_every_s", "must be > 0", self.log_every_s)
+        _check(self.eval_episodes >= 0, "train.eval_episodes", "must be >= 0", self.eval_episodes)
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    env: EnvConfig = field(default_factory=EnvConfig)
+    actor: ActorConfig = field(default_factory=ActorConfig)
+    replay: ReplayConfig = field(default_factory=ReplayConfig)
+    learner: LearnerConfig = field(default_factory=LearnerConfig)
+    transport: TransportConfig = field(default_factory=TransportConfig)
+    train: TrainConfig = field(default_factory=TrainConfig)
+
+    def __post_init__(self) -> None:
+        rows = self.learner.batch_size * max(self.learner.prefetch, self.learner.updates_per_round)
+        if self.replay.samples_per_insert and rows > self.replay.spi_tolerance:
+            raise ConfigError(f"replay.spi_tolerance: must be >= the rows of one sample request "
+                              f"(learner.batch_size x max(prefetch, updates_per_round) = {rows}), or sampling and "
+                              f"inserting could block each other forever, got {self.replay.spi_tolerance!r}")
+
+    def to_dict(self) -> dict[str, dict[str, Any]]:
+        return {f.name: _plain(dataclasses.asdict(getattr(self, f.name))) for f in dataclasses.fields(self)}
+
+    def replace(self, **sections: Any) -> "RunConfig":
+        return dataclasses.replace(self, **sections)
+
+
+SECTIONS: dict[str, type] = {"env": EnvConfig, "actor": ActorConfig, "replay": ReplayConfig, "learner": LearnerConfig,
+            "transport": TransportConfig, "train": TrainConfig}
+
+
+def _plain(d: Mapping[str, Any]) -> dict[str, Any]:
+    return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
+
+
+def _coerce(where: str, typ: Any, value: Any) -> Any:
+    """Turn a YAML/TOML/CLI value into ``typ``; strings from the CLI are parsed."""
+    origin = typing.get_origin(typ)
+    if origin is tuple:
+        (item,) = {a for a in typing.get_args(typ) if a is not Ellipsis}
+        if isinstance(value, str):
+            value = [v for v in value.split(",") if v.strip()] if value.strip() else []
+        if not isinstance(value, (list, tuple)):
+            raise ConfigError(f"{where}: must be a list, got {value!r}")
+        return tuple(_coerce(where, item, v) for v in value)
+    if typ is bool:
+        if isinstance(value, bool):
+            return value
+        if isinstance(value, str) and value.lower() in ("1", "true", "yes", "on", "0", "false", "no", "off"):
+            return value.lower() in ("1", "true", "yes", "on")
+        raise ConfigError(f"{where}: must be true or false, got {value!r}")
+    if typ is int:
+        if isinstance(value, bool):
+            raise ConfigError(f"{where}: must be an integer, got {value!r}")
+        if isinstance(value, int):
+            return value
+        if isinstance(value, float) and value.is_integer():
+            return int(value)
+        if isinstance(value, str):
+            try:
+                return int(value.replace("_", ""))
+            except ValueError:
+                try:  # "2e4" is a common way to write a budget
+                    as_float = float(value)
+                    if as_float.is_integer():
+                        return int(as_float)
+                except ValueError:
+                    pass
+        raise ConfigError(f"{where}: must be an integer, got {value!r}")
+    if typ is float:
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            return float(value)
+        if isinstance(value, str):
+            try:
+                return float(value)
+            except ValueError:
+                pass
+        raise ConfigError(f"{where}: must be a number, got {value!r}")
+    if typ is str:
+        if isinstance(value, (str, int, float)) and not isinstance(value, bool):
+            return str(value)
+        raise ConfigError(f"{where}: must be a string, got {value!r}")
+    raise ConfigError(f"{where}: unsupported type {typ}")
+
+
+def build_section(name: str, values: Mapping[str, Any]) -> Any:
+    """Build one component config from a mapping, refusing unknown fields and bad types."""
+    cls = SECTIONS[name]
+    hints = typing.get_type_hints(cls)
+    known = {f.name for f in dataclasses.fields(cls)}
+    unknown = set(values) - known
+    if unknown:
+        raise ConfigError(f"{name}.{sorted(unknown)[0]}: unknown field (known: {', '.join(sorted(known))})")
+    kwargs = {k: _coerce(f"{name}.{k}", hints[k], v) for k, v in values.items()}
+    try:
+        return cls(**kwargs)
+    except TypeError as exc:  # pragma: no cover - guarded by the unknown-field check
+        raise ConfigError(f"{name}: {exc}") from None
+
+
+def read_config_file(path: str | Path) -> dict[str, dict[str, Any]]:
+    """Read a YAML (.yaml/.yml), TOML (.toml) or JSON file with one table per component."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise ConfigError(f"config file {path}: {exc.strerror}") from None
+    try:
+        if path.suffix == ".toml":
+            data = tomllib.loads(text)
+        elif path.suffix == ".json":
+            data = json.loads(text)
+        else:
+            data = yaml.safe_load(text) or {}
+    except (yaml.YAMLError, tomllib.TOMLDecodeError, json.JSONDecodeError) as exc:
+        raise ConfigError(f"config file {path}: not valid {path.suffix.lstrip('.') or 'yaml'}: {exc}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"config file {path}: top level must be a mapping of sections")
+    for section, body in data.items():
+        if section not in SECTIONS:
+            raise ConfigError(f"config file {path}: unknown section {section!r} (known: {', '.join(SECTIONS)})")
+        if not isinstance(body, dict):
+            raise ConfigError(f"config file {path}: section {section!r} must be a mapping")
+    return data
+
+
+def load_run_config(path: str | Path | None = None, overrides: Mapping[str, Any] | None = None,
+                    base: RunConfig | None = None) -> RunConfig:
+    """File values over ``base`` (defaults), then ``overrides`` ({"section.field": value}) on top."""
+    merged: dict[str, dict[str, Any]] = (base or RunConfig()).to_dict()
+    if path is not None:
+        for section, body in read_config_file(path).items():
+            merged[section].update(body)
+    for dotted, value in (overrides or {}).items():
+        section, _, name = dotted.partition(".")
+        if section not in SECTIONS or not name:
+            raise ConfigError(f"{dotted}: overrides are written section.field (sections: {', '.join(SECTIONS)})")
+        merged[section][name] = value
+    return RunConfig(**{name: build_section(name, body) for name, body in merged.items()})
+
+
+def save_run_config(cfg: RunConfig, path: str | Path) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(yaml.safe_dump(cfg.to_dict(), sort_keys=False))
+    return path

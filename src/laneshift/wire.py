@@ -1,0 +1,549 @@
+"""The wire contract: every message format and zenoh key expression of laneshift.
+
+This module imports only numpy and the standard library, so any process (or a client
+written from ``docs/wire.md`` in another language) can speak the protocol. Nothing that
+arrives over the network is ever unpickled: messages are a fixed binary envelope, a JSON
+header and raw little-endian array bytes, validated field by field on decode.
+
+Envelope (all integers little-endian)::
+
+    offset  size  field
+    0       4     magic b"LSHF"
+    4       2     wire version (uint16) == WIRE_VERSION
+    6       1     message kind (uint8), see Kind
+    7       1     reserved, must be 0
+    8       4     header length H (uint32), 2 <= H <= MAX_HEADER_BYTES
+    12      H     UTF-8 JSON object: kind-specific fields + "arrays": [{"name","dtype","shape"}...]
+    12+H    ...   the arrays' bytes, C order, in the order listed, no padding
+
+The total length must equal ``12 + H + sum(array nbytes)`` exactly; weights messages carry a
+safetensors blob as their single ``uint8`` array.
+
+Example::
+
+    >>> import numpy as np
+    >>> schema = TransitionSchema(obs_shape=(3,), obs_dtype="float32", n_actions=9)
+    >>> batch = TransitionBatch.from_arrays(actor="w0", seq=0, weights_version=0, phase=0,
+    ...     env_steps=2, obs=np.zeros((2, 3), np.float32), action=np.array([1, 2]),
+    ...     reward=np.zeros(2, np.float32), next_obs=np.ones((2, 3), np.float32),
+    ...     terminated=np.array([0, 1]), truncated=np.array([0, 0]))
+    >>> decode_transitions(encode_transitions(batch), schema).action.tolist()
+    [1, 2]
+"""
+
+from __future__ import annotations
+
+import enum
+import json
+import math
+import re
+import struct
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+import numpy as np
+
+WIRE_VERSION = 1
+MAGIC = b"LSHF"
+_ENVELOPE = struct.Struct("<4sHBBI")  # magic, version, kind, reserved, header length
+MAX_HEADER_BYTES = 64 * 1024
+MAX_MESSAGE_BYTES = 256 * 1024 * 1024
+MAX_BATCH_ROWS = 65536
+# Dtypes allowed on the wire (numpy little-endian codes). Anything else is refused.
+ALLOWED_DTYPES = {"|u1", "|b1", "|i1", "<i2", "<u2", "<i4", "<u4", "<i8", "<f2", "<f4", "<f8"}
+_NAME = re.compile(r"^[A-Za-z0-9_\-]{1,64}$")
+
+
+class Kind(enum.IntEnum):
+    """Message kinds; the byte at offset 6 of the envelope."""
+
+    TRANSITIONS = 1  # actor -> replay server: a batch of transitions
+    WEIGHTS = 2  # learner -> actors: safetensors blob + version
+    SAMPLE_REQUEST = 3  # learner -> replay server (query payload)
+    BATCH = 4  # replay server -> learner (query reply)
+    ERROR = 5  # any reply that could not be served
+    JSON = 6  # stats, episode statistics, control commands: header only
+
+
+class WireError(ValueError):
+    """A message failed validation. ``reason`` is a short stable label for counters."""
+
+    def __init__(self, reason: str, detail: str):
+        super().__init__(f"{reason}: {detail}")
+        self.reason = reason
+        self.detail = detail
+
+
+# --------------------------------------------------------------------------- key expressions
+
+
+def _check_name(kind: str, value: str) -> str:
+    if not isinstance(value, str) or not _NAME.match(value):
+        raise ValueError(f"{kind} {value!r} must match [A-Za-z0-9_-]{{1,64}}")
+    return value
+
+
+def transitions_key(run: str, actor: str) -> str:
+    """Where actor ``actor`` publishes its transition batches."""
+    return f"laneshift/{_check_name('run', run)}/transitions/{_check_name('actor', actor)}"
+
+
+def transitions_wildcard(run: str) -> str:
+    return f"laneshift/{_check_name('run', run)}/transitions/*"
+
+
+def actor_from_transitions_key(key: str) -> str:
+    """The actor name at the end of a transitions key (validated)."""
+    return _check_name("actor", str(key).rsplit("/", 1)[-1])
+
+
+def weights_key(run: str) -> str:
+    """Learner publishes every new weights version here (subscribe for updates)."""
+    return f"laneshift/{_check_name('run', run)}/weights"
+
+
+def weights_latest_key(run: str) -> str:
+    """Queryable answering with the latest weights (for late joiners and reconnects)."""
+    return f"laneshift/{_check_name('run', run)}/weights/latest"
+
+
+def sample_key(run: str) -> str:
+    return f"laneshift/{_check_name('run', run)}/replay/sample"
+
+
+def replay_stats_key(run: str) -> str:
+    return f"laneshift/{_check_name('run', run)}/replay/stats"
+
+
+def replay_control_key(run: str) -> str:
+    return f"laneshift/{_check_name('run', run)}/replay/control"
+
+
+def replay_flow_key(run: str) -> str:
+    """Replay server -> actors: ``{"insert_ok": bool}``, whether the learner keeps up (rate limiter)."""
+    return f"laneshift/{_check_name('run', run)}/replay/flow"
+
+
+def episodes_key(run: str, actor: str) -> str:
+    return f"laneshift/{_check_name('run', run)}/episodes/{_check_name('actor', actor)}"
+
+
+def episodes_wildcard(run: str) -> str:
+    return f"laneshift/{_check_name('run', run)}/episodes/*"
+
+
+def learner_stats_key(run: str) -> str:
+    return f"laneshift/{_check_name('run', run)}/learner/stats"
+
+
+def control_key(run: str) -> str:
+    """Run-wide control broadcast (e.g. ``{"cmd": "stop"}``)."""
+    return f"laneshift/{_check_name('run', run)}/control"
+
+
+# --------------------------------------------------------------------------- envelope
+
+
+def _dtype_code(arr: np.ndarray) -> str:
+    dt = arr.dtype.newbyteorder("<") if arr.dtype.byteorder == ">" else arr.dtype
+    code = dt.str
+    if code not in ALLOWED_DTYPES:
+        raise ValueError(f"dtype {arr.dtype} cannot travel on the wire")
+    return code
+
+
+def encode(kind: Kind, header: Mapping[str, Any], arrays: Mapping[str, np.ndarray] | None = None) -> bytes:
+    """Pack a message: envelope + JSON header (with the array table) + array bytes."""
+    arrays = arrays or {}
+    table, blobs = [], []
+    for name, arr in arrays.items():
+        arr = np.ascontiguousarray(arr)
+        code = _dtype_code(arr)
+        arr = arr.astype(code, copy=False)
+        table.append({"name": name, "dtype": code, "shape": list(arr.shape)})
+        blobs.append(arr.tobytes())
+    head = dict(header)
+    head["arrays"] = table
+    head_bytes = json.dumps(head, separators=(",", ":"), allow_nan=False).encode()
+    if len(head_bytes) > MAX_HEADER_BYTES:
+        raise ValueError(f"header of {len(head_bytes)} bytes exceeds {MAX_HEADER_BYTES}")
+    return b"".join([_ENVELOPE.pack(MAGIC, WIRE_VERSION, int(kind), 0, len(head_bytes)), head_bytes, *blobs])
+
+
+@dataclass(frozen=True)
+class Message:
+    kind: Kind
+    header: dict
+    arrays: dict[str, np.ndarray]
+
+
+def decode(data: bytes | bytearray | memoryview, expect: Kind | None = None) -> Message:
+    """Parse and validate the envelope and array table. Raises WireError(reason, detail)."""
+    buf = memoryview(data).cast("B")
+    if len(buf) > MAX_MESSAGE_BYTES:
+        raise WireError("oversized", f"{len(buf)} bytes > {MAX_MESSAGE_BYTES}")
+    if len(buf) < _ENVELOPE.size:
+        raise WireError("truncated", f"{len(buf)} bytes is shorter than the {_ENVELOPE.size}-byte envelope")
+    magic, version, kind, reserved, hlen = _ENVELOPE.unpack_from(buf, 0)
+    if magic != MAGIC:
+        raise WireError("bad_magic", f"magic {bytes(magic)!r} != {MAGIC!r}")
+    if version != WIRE_VERSION:
+        raise WireError("wrong_version", f"wire version {version}, this build speaks {WIRE_VERSION}")
+    try:
+        kind = Kind(kind)
+    except ValueError:
+        raise WireError("bad_kind", f"unknown message kind {kind}") from None
+    if expect is not None and kind != expect:
+        raise WireError("wrong_kind", f"expected {expect.name}, got {kind.name}")
+    if reserved != 0:
+        raise WireError("bad_envelope", "reserved byte is not 0")
+    if not 2 <= hlen <= MAX_HEADER_BYTES:
+        raise WireError("bad_header", f"header length {hlen} out of range")
+    end = _ENVELOPE.size + hlen
+    if len(buf) < end:
+        raise WireError("truncated", f"header needs {end} bytes, message has {len(buf)}")
+    try:
+        header = json.loads(bytes(buf[_ENVELOPE.size:end]).decode("utf-8"), parse_constant=_reject_constant)
+    except (UnicodeDecodeError, json.JSONDecodeError, ValueError) as exc:
+        raise WireError("bad_header", f"header is not valid JSON: {exc}") from None
+    if not isinstance(header, dict) or not isinstance(header.get("arrays"), list):
+        raise WireError("bad_header", "header must be an object with an 'arrays' list")
+    arrays: dict[str, np.ndarray] = {}
+    offset = end
+    for spec in header.pop("arrays"):
+        name, arr, offset = _read_array(buf, spec, offset)
+        if name in arrays:
+            raise WireError("bad_header", f"array {name!r} listed twice")
+        arrays[name] = arr
+    if offset != len(buf):
+        raise WireError("trailing_bytes" if offset < len(buf) else "truncated",
+                        f"arrays end at byte {offset}, message has {len(buf)}")
+    return Message(kind, header, arrays)
+
+
+def _reject_constant(name: str) -> None:
+    raise ValueError(f"{name} is not allowed in headers")
+
+
+def _read_array(buf: memoryview, spec: Any, offset: int) -> tuple[str, np.ndarray, int]:
+    if not isinstance(spec, dict) or set(spec) != {"name", "dtype", "shape"}:
+        raise WireError("bad_header", f"array entry {spec!r} must have exactly name, dtype, shape")
+    name, code, shape = spec["name"], spec["dtype"], spec["shape"]
+    if not isinstance(name, str) or not _NAME.match(name):
+        raise WireError("bad_header", f"bad array name {name!r}")
+    if code not in ALLOWED_DTYPES:
+        raise WireError("bad_dtype", f"array {name!r}: dtype {code!r} not allowed")
+    if (not isinstance(shape, list) or len(shape) > 8
+            or not all(isinstance(d, int) and not isinstance(d, bool) and 0 <= d < 2**31 for d in shape)):
+        raise WireError("bad_shape", f"array {name!r}: bad shape {shape!r}")
+    dtype = np.dtype(code)
+    nbytes = math.prod(shape) * dtype.itemsize
+    if offset + nbytes > len(buf):
+        raise WireError("truncated", f"array {name!r} needs {nbytes} bytes at {offset}, message has {len(buf)}")
+    # Copy out of the network buffer: the caller may keep the array after zenoh reuses it.
+    arr = np.frombuffer(buf, dtype=dtype, count=math.prod(shape), offset=offset).reshape(shape).copy()
+    return name, arr, offset + nbytes
+
+
+def _require(header: dict, name: str, typ: type | tuple, reason: str = "bad_header") -> Any:
+    value = header.get(name)
+    if not isinstance(value, typ) or isinstance(value, bool) and typ is not bool:
+        raise WireError(reason, f"header field {name!r} must be {getattr(typ, '__name__', typ)}, got {value!r}")
+    return value
+
+
+# --------------------------------------------------------------------------- transitions
+
+
+@dataclass(frozen=True)
+class TransitionSchema:
+    """What a run's transitions look like; the replay server validates every batch against it."""
+
+    obs_shape: tuple[int, ...]
+    obs_dtype: str
+    n_actions: int
+    max_rows: int = MAX_BATCH_ROWS
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "obs_shape", tuple(int(d) for d in self.obs_shape))
+        object.__setattr__(self, "obs_dtype", np.dtype(self.obs_dtype).str)
+
+
+@dataclass(frozen=True)
+class TransitionBatch:
+    """B transitions from one actor, produced under one weights version."""
+
+    actor: str
+    seq: int  # per-actor message counter, starts at 0
+    weights_version: int  # the weights version that chose these actions
+    phase: int  # rehearsal phase the actor was in (0 when not rehearsing)
+    env_steps: int  # the actor's cumulative env steps after this batch
+    obs: np.ndarray
+    action: np.ndarray
+    reward: np.ndarray
+    next_obs: np.ndarray
+    terminated: np.ndarray
+    truncated: np.ndarray
+    extra: dict = field(default_factory=dict)  # free-form JSON fields (e.g. episode ids)
+
+    @classmethod
+    def from_arrays(cls, **kw: Any) -> "TransitionBatch":
+        kw["action"] = np.asarray(kw["action"], dtype=np.int64)
+        kw["reward"] = np.asarray(kw["reward"], dtype=np.float32)
+        kw["terminated"] = np.asarray(kw["terminated"], dtype=np.uint8)
+        kw["truncated"] = np.asarray(kw["truncated"], dtype=np.uint8)
+        return cls(**kw)
+
+    def __len__(self) -> int:
+        return int(self.action.shape[0])
+
+
+def encode_transitions(batch: TransitionBatch) -> bytes:
+    header = {"actor": batch.actor, "seq": int(batch.seq), "weights_version": int(batch.weights_version),
+              "phase": int(batch.phase), "env_steps": int(batch.env_steps), "extra": batch.extra}
+    return encode(Kind.TRANSITIONS, header, {
+        "obs": batch.obs, "action": np.asarray(batch.action, np.int64), "reward": np.asarray(batch.reward, np.float32),
+        "next_obs": batch.next_obs, "terminated": np.asarray(batch.terminated, np.uint8),
+        "truncated": np.asarray(batch.truncated, np.uint8)})
+
+
+def decode_transitions(data: bytes | bytearray | memoryview, schema: TransitionSchema) -> TransitionBatch:
+    """Decode and validate a transitions message against ``schema``; raises WireError."""
+    msg = decode(data, expect=Kind.TRANSITIONS)
+    h = msg.header
+    actor = _require(h, "actor", str)
+    if not _NAME.match(actor):
+        raise WireError("bad_header", f"bad actor name {actor!r}")
+    ints = {k: _require(h, k, int) for k in ("seq", "weights_version", "phase", "env_steps")}
+    if any(v < 0 for v in ints.values()):
+        raise WireError("bad_header", f"negative counter in {ints}")
+    extra = h.get("extra", {})
+    if not isinstance(extra, dict):
+        raise WireError("bad_header", "'extra' must be an object")
+    a = msg.arrays
+    expected = {"obs", "action", "reward", "next_obs", "terminated", "truncated"}
+    if set(a) != expected:
+        raise WireError("bad_arrays", f"arrays {sorted(a)} != {sorted(expected)}")
+    rows = a["action"].shape[0] if a["action"].ndim == 1 else -1
+    if not 1 <= rows <= schema.max_rows:
+        raise WireError("bad_shape", f"action must be 1-D with 1..{schema.max_rows} rows, got {a['action'].shape}")
+    for name in ("obs", "next_obs"):
+        if a[name].shape != (rows, *schema.obs_shape):
+            raise WireError("bad_shape", f"{name} shape {a[name].shape} != {(rows, *schema.obs_shape)}")
+        if a[name].dtype.str != schema.obs_dtype:
+            raise WireError("bad_dtype", f"{name} dtype {a[name].dtype.str} != {schema.obs_dtype}")
+    for name, code in (("action", "<i8"), ("reward", "<f4"), ("terminated", "|u1"), ("truncated", "|u1")):
+        if a[name].shape != (rows,):
+            raise WireError("bad_shape", f"{name} shape {a[name].shape} != {(rows,)}")
+        if a[name].dtype.str != code:
+            raise WireError("bad_dtype", f"{name} dtype {a[name].dtype.str} != {code}")
+    if a["action"].min() < 0 or a["action"].max() >= schema.n_actions:
+        raise WireError("bad_value", f"action outside [0, {schema.n_actions})")
+    if a["terminated"].max() > 1 or a["truncated"].max() > 1:
+        raise WireError("bad_value", "terminated/truncated must be 0 or 1")
+    for name in ("reward", "obs", "next_obs"):
+        if a[name].dtype.kind == "f" and not np.isfinite(a[name]).all():
+            raise WireError("non_finite", f"{name} contains NaN or inf")
+    return TransitionBatch(actor=actor, extra=extra, **ints, **a)
+
+
+# --------------------------------------------------------------------------- weights (safetensors)
+
+_ST_DTYPES = {"F64": "<f8", "F32": "<f4", "F16": "<f2", "I64": "<i8", "I32": "<i4", "I16": "<i2",
+              "I8": "|i1", "U8": "|u1", "BOOL": "|b1"}
+_ST_CODES = {v: k for k, v in _ST_DTYPES.items()}
+
+
+def safetensors_dumps(tensors: Mapping[str, np.ndarray], metadata: Mapping[str, str] | None = None) -> bytes:
+    """Serialise arrays in the safetensors format (``safetensors.numpy.load`` reads it, and vice versa)."""
+    header: dict[str, Any] = {}
+    if metadata:
+        header["__metadata__"] = {str(k): str(v) for k, v in metadata.items()}
+    blobs, offset = [], 0
+    for name in sorted(tensors):
+        arr = np.ascontiguousarray(tensors[name])
+        code = _dtype_code(arr)
+        raw = arr.astype(code, copy=False).tobytes()
+        header[name] = {"dtype": _ST_CODES[code], "shape": list(arr.shape), "data_offsets": [offset, offset + len(raw)]}
+        blobs.append(raw)
+        offset += len(raw)
+    head = json.dumps(header, separators=(",", ":")).encode()
+    head += b" " * (-len(head) % 8)  # the format pads the header to 8-byte alignment
+    return b"".join([struct.pack("<Q", len(head)), head, *blobs])
+
+
+def safetensors_loads(data: bytes | bytearray | memoryview) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    """Parse a safetensors blob into numpy arrays, validating every offset. Raises WireError."""
+    buf = memoryview(data).cast("B")
+    if len(buf) < 8:
+        raise WireError("bad_weights", "safetensors blob shorter than 8 bytes")
+    (hlen,) = struct.unpack_from("<Q", buf, 0)
+    if hlen > min(MAX_HEADER_BYTES * 16, len(buf) - 8):
+        raise WireError("bad_weights", f"safetensors header length {hlen} out of range")
+    try:
+        header = json.loads(bytes(buf[8:8 + hlen]).decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise WireError("bad_weights", f"safetensors header is not JSON: {exc}") from None
+    if not isinstance(header, dict):
+        raise WireError("bad_weights", "safetensors header is not an object")
+    meta = header.pop("__metadata__", {}) or {}
+    data_start, data_len = 8 + hlen, len(buf) - 8 - hlen
+    tensors, spans = {}, []
+    for name, spec in header.items():
+        try:
+            code = _ST_DTYPES[spec["dtype"]]
+            shape = [int(d) for d in spec["shape"]]
+            begin, stop = (int(x) for x in spec["data_offsets"])
+        except (KeyError, TypeError, ValueError):
+            raise WireError("bad_weights", f"tensor {name!r}: bad entry {spec!r}") from None
+        nbytes = math.prod(shape) * np.dtype(code).itemsize
+        if any(d < 0 for d in shape) or not 0 <= begin <= stop <= data_len or stop - begin != nbytes:
+            raise WireError("bad_weights", f"tensor {name!r}: offsets {begin}..{stop} do not fit shape {shape}")
+        arr = np.frombuffer(buf, dtype=code, count=math.prod(shape), offset=data_start + begin).reshape(shape).copy()
+        if arr.dtype.kind == "f" and not np.isfinite(arr).all():
+            raise WireError("non_finite", f"tensor {name!r} contains NaN or inf")
+        tensors[name] = arr
+        spans.append((begin, stop))
+    spans.sort()
+    if any(a[1] > b[0] for a, b in zip(spans, spans[1:])):
+        raise WireError("bad_weights", "tensors overlap")
+    return tensors, {str(k): str(v) for k, v in dict(meta).items()}
+
+
+@dataclass(frozen=True)
+class Weights:
+    version: int  # strictly increasing per run
+    phase: int  # rehearsal phase (0 when not rehearsing)
+    updates: int  # learner updates done when these weights were taken
+    tensors: dict[str, np.ndarray]
+
+
+def encode_weights(weights: Weights) -> bytes:
+    blob = safetensors_dumps(weights.tensors, {"version": str(weights.version)})
+    header = {"version": int(weights.version), "phase": int(weights.phase), "updates": int(weights.updates)}
+    return encode(Kind.WEIGHTS, header, {"safetensors": np.frombuffer(blob, np.uint8)})
+
+
+def decode_weights(data: bytes | bytearray | memoryview) -> Weights:
+    msg = decode(data, expect=Kind.WEIGHTS)
+    ints = {k: _require(msg.header, k, int) for k in ("version", "phase", "updates")}
+    if ints["version"] < 0:
+        raise WireError("bad_header", "negative weights version")
+    if set(msg.arrays) != {"safetensors"} or msg.arrays["safetensors"].ndim != 1:
+        raise WireError("bad_arrays", "weights carry exactly one 1-D uint8 array 'safetensors'")
+    tensors, _ = safetensors_loads(msg.arrays["safetensors"].tobytes())
+    return Weights(tensors=tensors, **ints)
+
+
+# --------------------------------------------------------------------------- sampling
+
+
+@dataclass(frozen=True)
+class SampleRequest:
+    batch_size: int
+    num_batches: int = 1
+    # Sync parallel mode: serve only once every listed actor delivered a batch made with
+    # weights version >= min_version (the MATLAB "host waits for every worker").
+    min_version: int = -1
+    actors: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.batch_size <= MAX_BATCH_ROWS or not 1 <= self.num_batches <= 64:
+            raise WireError("bad_request", f"batch_size {self.batch_size} / num_batches {self.num_batches} out of range")
+        if self.batch_size * self.num_batches > MAX_BATCH_ROWS:
+            raise WireError("bad_request", "batch_size * num_batches too large")
+
+
+def encode_sample_request(req: SampleRequest) -> bytes:
+    return encode(Kind.SAMPLE_REQUEST, {"batch_size": req.batch_size, "num_batches": req.num_batches,
+                                        "min_version": req.min_version, "actors": list(req.actors)})
+
+
+def decode_sample_request(data: bytes | bytearray | memoryview) -> SampleRequest:
+    msg = decode(data, expect=Kind.SAMPLE_REQUEST)
+    h = msg.header
+    actors = h.get("actors", [])
+    if not isinstance(actors, list) or not all(isinstance(x, str) and _NAME.match(x) for x in actors):
+        raise WireError("bad_request", f"bad actors list {actors!r}")
+    return SampleRequest(batch_size=_require(h, "batch_size", int, "bad_request"),
+                         num_batches=_require(h, "num_batches", int, "bad_request"),
+                         min_version=_require(h, "min_version", int, "bad_request"), actors=tuple(actors))
+
+
+@dataclass(frozen=True)
+class SampledBatch:
+    """``num_batches * batch_size`` rows; split with ``np.split(..., num_batches)``."""
+
+    obs: np.ndarray
+    action: np.ndarray
+    reward: np.ndarray
+    next_obs: np.ndarray
+    terminated: np.ndarray
+    is_demo: np.ndarray  # 1 where the row came from the demo shard
+    index: np.ndarray  # item keys, for priority updates
+    weight: np.ndarray  # importance-sampling weights (1 for uniform sampling)
+    num_batches: int = 1
+    info: dict = field(default_factory=dict)
+
+
+_BATCH_FIELDS = ("obs", "action", "reward", "next_obs", "terminated", "is_demo", "index", "weight")
+
+
+def encode_batch(batch: SampledBatch) -> bytes:
+    return encode(Kind.BATCH, {"num_batches": batch.num_batches, "info": batch.info},
+                  {k: getattr(batch, k) for k in _BATCH_FIELDS})
+
+
+def decode_batch(data: bytes | bytearray | memoryview, schema: TransitionSchema) -> SampledBatch:
+    msg = decode(data, expect=Kind.BATCH)
+    if set(msg.arrays) != set(_BATCH_FIELDS):
+        raise WireError("bad_arrays", f"batch arrays {sorted(msg.arrays)}")
+    rows = msg.arrays["action"].shape[0]
+    for name in ("obs", "next_obs"):
+        if msg.arrays[name].shape != (rows, *schema.obs_shape) or msg.arrays[name].dtype.str != schema.obs_dtype:
+            raise WireError("bad_shape", f"batch {name} {msg.arrays[name].shape} does not fit the schema")
+    for name in _BATCH_FIELDS[1:]:
+        if name not in ("next_obs",) and msg.arrays[name].shape != (rows,):
+            raise WireError("bad_shape", f"batch {name} shape {msg.arrays[name].shape}")
+    nb = _require(msg.header, "num_batches", int)
+    if nb < 1 or rows % nb:
+        raise WireError("bad_header", f"{rows} rows do not split into {nb} batches")
+    return SampledBatch(num_batches=nb, info=msg.header.get("info", {}), **msg.arrays)
+
+
+# --------------------------------------------------------------------------- JSON messages and errors
+
+
+def encode_json(body: Mapping[str, Any]) -> bytes:
+    """Stats, episode records and control commands: a header-only message."""
+    return encode(Kind.JSON, {"body": dict(body)})
+
+
+def decode_json(data: bytes | bytearray | memoryview) -> dict:
+    msg = decode(data, expect=Kind.JSON)
+    body = msg.header.get("body")
+    if not isinstance(body, dict) or msg.arrays:
+        raise WireError("bad_header", "JSON message needs an object 'body' and no arrays")
+    return body
+
+
+def encode_error(reason: str, detail: str = "", retry_after_ms: int = 0) -> bytes:
+    return encode(Kind.ERROR, {"reason": reason, "detail": detail, "retry_after_ms": int(retry_after_ms)})
+
+
+def peek_kind(data: bytes | bytearray | memoryview) -> Kind | None:
+    """The kind byte of a message, or None if the envelope is unreadable (no validation)."""
+    buf = memoryview(data).cast("B")
+    if len(buf) < _ENVELOPE.size or bytes(buf[:4]) != MAGIC:
+        return None
+    try:
+        return Kind(buf[6])
+    except ValueError:
+        return None
+
+
+def decode_error(data: bytes | bytearray | memoryview) -> WireError:
+    msg = decode(data, expect=Kind.ERROR)
+    err = WireError(str(msg.header.get("reason", "error")), str(msg.header.get("detail", "")))
+    err.retry_after_ms = int(msg.header.get("retry_after_ms", 0) or 0)  # type: ignore[attr-defined]
+    return err
