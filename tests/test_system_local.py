@@ -1,0 +1,207 @@
+"""The whole system with 2 local workers: real Ray actors, a zenoh router, replay-server and
+learner processes. Uses the LKA plant (fast) so each run takes seconds, not minutes."""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from laneshift import transport, wire
+from laneshift.config import load_run_config
+from laneshift.deploy.local import free_tcp_port, train_local
+from laneshift.deploy.processes import ProcessGroup, wait_for_file
+from laneshift.learner.weights import load_checkpoint, tensors_digest
+
+# Small and fast, but every mechanism on: rate limiter, prefetch, target syncs, checkpoints.
+FAST = {"env.scenario": "lka", "actor.workers": 2, "actor.send_every": 50, "actor.epsilon_decay_steps": 1000,
+        "learner.hidden": "64,64", "learner.batch_size": 64, "learner.publish_every": 10,
+        "learner.checkpoint_every": 100, "replay.samples_per_insert": 8, "replay.spi_tolerance": 1024,
+        "train.eval_episodes": 0, "train.log_every_s": 0.5}
+
+
+@pytest.fixture(scope="module")
+def lka_demos(tmp_path_factory) -> str:
+    from laneshift.demos.generate import generate_shard
+
+    out = tmp_path_factory.mktemp("demos") / "lka"
+    return str(generate_shard(out, env_id_or_scenario="lka", env_kwargs={}, episodes=6, seed=0))
+
+
+def run(tmp_path: Path, **overrides) -> tuple[Path, dict, dict]:
+    run_dir = tmp_path / "run"
+    cfg = load_run_config(overrides={**FAST, "train.run_dir": str(run_dir), **overrides})
+    out = io.StringIO()
+    rc = train_local(cfg, out=out)
+    assert rc == 0, out.getvalue()
+    summary = json.loads((run_dir / "summary.json").read_text())
+    replay = json.loads((run_dir / "replay_stats.json").read_text())
+    return run_dir, summary, replay
+
+
+def test_retention_async_two_workers(tmp_path, lka_demos):
+    """Both workers' transitions arrive; the demo share holds after many wraps; no demo evicted."""
+    run_dir, summary, replay = run(tmp_path, **{
+        "replay.demo_mode": "retention", "replay.demo_paths": lka_demos, "replay.capacity": 1000,
+        "replay.demo_ratio": 0.1, "replay.min_size": 200, "train.env_steps": 6000})
+    workers = {w["name"]: w for w in summary["workers"]}
+    assert set(workers) == {"w0", "w1"} == set(replay["actors"])
+    for name, actor in replay["actors"].items():
+        assert actor["items"] == actor["stored"] == workers[name]["env_steps"] > 0
+        assert actor["lost_batches"] == 0
+    assert sum(a["items"] for a in replay["actors"].values()) == 6000
+    assert replay["rejected"] == {}
+    # The online part (900) wrapped more than 6 times; 100 demo items stayed, bit for bit.
+    assert replay["tables"]["online"]["inserted"] == 6000 and replay["tables"]["online"]["capacity"] == 900
+    assert replay["tables"]["demo"]["size"] == 100
+    assert replay["demo_share_buffer"] == pytest.approx(0.1)
+    assert replay["demo_digest_start"] == replay["demo_digest_end"]
+    assert abs(replay["demo_share_recent_samples"] - 0.1) < 0.03, replay["demo_share_recent_samples"]
+    # Weight versions reached both actors while they acted.
+    for w in workers.values():
+        assert w["weight_updates"] >= 3 and max(w["versions_used"]) >= 2
+    assert (run_dir / "checkpoints" / "final.safetensors").exists()
+    assert list((run_dir / "tb").glob("events.out.tfevents.*"))
+
+
+def test_rehearsal_phase1_stores_nothing_and_phase2_starts_from_it(tmp_path, lka_demos):
+    run_dir, summary, replay = run(tmp_path, **{
+        "replay.demo_mode": "rehearsal", "replay.demo_paths": lka_demos, "learner.phase1_updates": 150,
+        "replay.min_size": 200, "train.env_steps": 2000})
+    assert replay["phase"] == 2
+    # Every stored item was made in phase 2 (actors only act once the phase-1 network exists).
+    assert replay["tables"]["online"]["inserted"] == 2000
+    assert all(v >= 1 for w in summary["workers"] for v in w["versions_used"])
+    phase1, meta = load_checkpoint(run_dir / "checkpoints" / "phase1.safetensors")
+    assert meta["phase"] == "1" and int(meta["updates"]) == 150
+    for w in summary["workers"]:
+        assert w["first_weights_sha256"] == tensors_digest(phase1)
+
+
+def test_sync_mode_never_acts_on_stale_weights(tmp_path):
+    _, summary, replay = run(tmp_path, **{"train.parallel": "sync", "train.env_steps": 1000,
+                                          "replay.min_size": 200, "learner.updates_per_round": 4})
+    used = [w["versions_used"] for w in summary["workers"]]
+    # Round k of every worker is acted with version k: the newest, never an older one.
+    assert used[0] == used[1] == list(range(len(used[0])))
+    assert len(used[0]) == 10
+    assert replay["rejected"] == {}
+
+
+@pytest.fixture
+def replay_server_process(tmp_path):
+    """A router and a replay-server process, as `laneshift train` starts them."""
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    cfg = load_run_config(overrides={**FAST, "transport.router": endpoint, "train.run_dir": str(tmp_path),
+                                     "replay.min_size": 2})
+    from laneshift.config import save_run_config
+
+    path = save_run_config(cfg, tmp_path / "config.yaml")
+    group = ProcessGroup(tmp_path / "logs")
+    py = [sys.executable, "-m", "laneshift"]
+    try:
+        group.start("router", [*py, "router", "--listen", endpoint])
+        group.start("replay-server", [*py, "replay-server", "--config", str(path), "--ready-file",
+                                      str(tmp_path / "ready")])
+        wait_for_file(tmp_path / "ready", 60, group, "replay-server")
+        yield cfg, group
+    finally:
+        group.stop_all()
+
+
+def _batch(n: int, obs: np.ndarray | None = None, seq: int = 0) -> wire.TransitionBatch:
+    obs = np.zeros((n, 6), np.float32) if obs is None else obs
+    return wire.TransitionBatch.from_arrays(actor="w9", seq=seq, weights_version=0, phase=0, env_steps=n, obs=obs,
+                                            action=np.zeros(n), reward=np.zeros(n, np.float32), next_obs=obs,
+                                            terminated=np.zeros(n), truncated=np.zeros(n))
+
+
+def test_malformed_messages_are_counted_and_dropped(replay_server_process):
+    cfg, group = replay_server_process
+    run_id = cfg.transport.run_id
+    good = wire.encode_transitions(_batch(5))
+    with transport.open_session(cfg.transport) as session:
+        pub = transport.data_publisher(session, wire.transitions_key(run_id, "w9"))
+        time.sleep(0.3)  # let the subscription propagate through the router
+        pub.put(b"not a laneshift message at all")
+        pub.put(good[:-7])  # truncated
+        pub.put(wire.encode_transitions(_batch(3, np.zeros((3, 5), np.float32))))  # wrong shape
+        nan = np.zeros((2, 6), np.float32)
+        nan[1, 2] = np.nan
+        pub.put(wire.encode_transitions(_batch(2, nan, seq=1)))  # NaN
+        pub.put(good)
+        stats = {}
+        for _ in range(50):
+            reply = transport.query(session, wire.replay_stats_key(run_id), b"", 2.0)
+            stats = wire.decode_json(reply) if reply else {}
+            if stats.get("tables", {}).get("online", {}).get("size") == 5:
+                break
+            time.sleep(0.1)
+    assert stats["rejected"] == {"bad_magic": 1, "truncated": 1, "bad_shape": 1, "non_finite": 1}
+    assert stats["tables"]["online"]["size"] == 5
+    group.check_alive()  # the server kept running
+
+
+def _descendants(pid: int) -> set[int]:
+    children: dict[int, list[int]] = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):
+                continue
+            children.setdefault(ppid, []).append(int(entry.name))
+    found, todo = set(), [pid]
+    while todo:
+        for child in children.get(todo.pop(), []):
+            if child not in found:
+                found.add(child)
+                todo.append(child)
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+def test_sigint_leaves_no_process_behind(tmp_path):
+    cmd = [sys.executable, "-m", "laneshift", "train", "--local", "--workers", "2", "--scenario", "lka",
+           "--env-steps", "10000000", "--run-dir", str(tmp_path / "run"), "--set", "train.log_every_s=0.5",
+           "--set", "learner.hidden=32"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    lines = []
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            line = proc.stdout.readline()
+            lines.append(line)
+            if " upd " in line and "steps       0/" not in line:
+                break  # actors, learner and replay server are all working
+        else:
+            pytest.fail("training never started:\n" + "".join(lines))
+        family = _descendants(proc.pid)
+        assert len(family) >= 5, family  # router, replay server, learner, Ray's processes and workers
+        proc.send_signal(signal.SIGINT)
+        rest, _ = proc.communicate(timeout=90)
+        assert proc.returncode == 130, "".join(lines) + rest
+        assert "interrupted" in rest
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and any(_alive(p) for p in family):
+            time.sleep(0.2)
+        assert not [p for p in family if _alive(p)], "processes left behind"
+    finally:
+        if proc.poll() is None:
+            proc.kill()
