@@ -68,9 +68,14 @@ def ensure_demo_shard(cfg: RunConfig, out: TextIO) -> RunConfig:
     return cfg.replace(replay=dataclasses.replace(cfg.replay, demo_paths=(str(path),)))
 
 
-def _ray_init(num_cpus: int) -> str:
-    """Start a private local Ray: temp dir of our own, no auth token under the home directory."""
+def _ray_init(num_cpus: int, address: str | None = None) -> str | None:
+    """Start a private local Ray (temp dir of our own, no auth token under the home directory),
+    or connect to a running cluster at ``address`` (its own settings apply)."""
     import ray
+
+    if address is not None:
+        ray.init(address=address, log_to_driver=True, configure_logging=False)
+        return None
 
     os.environ.setdefault("RAY_AUTH_MODE", "disabled")  # loopback-only cluster; keeps ~/.ray untouched
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
@@ -118,15 +123,22 @@ class Progress:
         self.out.flush()
 
 
-def train_local(cfg: RunConfig, out: TextIO = sys.stdout) -> int:
-    """Run a whole local training. Returns the exit code (0 ok, 1 failed, 130 interrupted)."""
+def train_local(cfg: RunConfig, out: TextIO = sys.stdout, ray_address: str | None = None,
+                advertise_host: str = "127.0.0.1") -> int:
+    """Run a whole training. Returns the exit code (0 ok, 1 failed, 130 interrupted).
+
+    Local mode by default. With ``ray_address`` the actors go to that Ray cluster and the router
+    listens on ``advertise_host`` (an address of this machine the cluster's nodes can reach);
+    router, replay server and learner stay processes on this machine (see ``train_cluster``).
+    """
     run_dir = Path(cfg.train.run_dir).resolve()
     run_dir.mkdir(parents=True, exist_ok=True)
-    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    endpoint = f"tcp/{advertise_host}:{free_tcp_port()}"
     cfg = cfg.replace(transport=dataclasses.replace(cfg.transport, router=endpoint),
                       train=dataclasses.replace(cfg.train, run_dir=str(run_dir)))
     group = ProcessGroup(run_dir / "logs")
     ray_tmp: str | None = None
+    ray_started = False
     session = None
     rc = 1
     started = time.monotonic()
@@ -152,7 +164,8 @@ def train_local(cfg: RunConfig, out: TextIO = sys.stdout) -> int:
 
         from .ray_worker import RayEnvWorker
 
-        ray_tmp = _ray_init(num_cpus=max(cfg.actor.workers, os.cpu_count() or 1))
+        ray_started = True
+        ray_tmp = _ray_init(num_cpus=max(cfg.actor.workers, os.cpu_count() or 1), address=ray_address)
         names = worker_names(cfg.actor.workers)
         plain = cfg.to_dict()
         workers = [RayEnvWorker.options(name=f"{cfg.transport.run_id}-{n}").remote(n, i, plain)
@@ -184,11 +197,12 @@ def train_local(cfg: RunConfig, out: TextIO = sys.stdout) -> int:
         print(f"\ntrain: {exc}", file=out, flush=True)
         rc = 1
     finally:
-        if ray_tmp is not None:
+        if ray_started:
             import ray
 
-            ray.shutdown()
-            shutil.rmtree(ray_tmp, ignore_errors=True)
+            ray.shutdown()  # on a cluster this only disconnects; our named actors die with the job
+            if ray_tmp is not None:
+                shutil.rmtree(ray_tmp, ignore_errors=True)
         if session is not None:
             session.close()
         group.stop_all()

@@ -24,13 +24,13 @@ from pathlib import Path
 
 import numpy as np
 import torch
-import zenoh
 
 from laneshift import transport, wire
 from laneshift.config import RunConfig
 from laneshift.envspec import EnvSpec, env_spec
 
 from .dqn import DoubleDQN
+from .links import LearnerLinks, ZenohLearnerLinks
 from .metrics import MetricsLog
 from .weights import save_checkpoint, to_wire
 
@@ -40,52 +40,17 @@ def worker_names(n: int) -> list[str]:
     return [f"w{i}" for i in range(n)]
 
 
-class ReplayClient:
-    """The learner's side of the replay server's queryables."""
-
-    def __init__(self, session: zenoh.Session, cfg: RunConfig, schema: wire.TransitionSchema):
-        self.session, self.schema = session, schema
-        self.run_id, self.timeout = cfg.transport.run_id, cfg.transport.timeout_s
-
-    def sample(self, req: wire.SampleRequest) -> wire.SampledBatch | wire.WireError | None:
-        reply = transport.query_ok(self.session, wire.sample_key(self.run_id), wire.encode_sample_request(req),
-                                   self.timeout)
-        if reply is None or isinstance(reply, wire.WireError):
-            return reply
-        return wire.decode_batch(reply, self.schema)
-
-    def stats(self) -> dict | None:
-        reply = transport.query(self.session, wire.replay_stats_key(self.run_id), b"", self.timeout)
-        return wire.decode_json(reply) if reply is not None else None
-
-    def control(self, body: dict) -> dict | None:
-        reply = transport.query(self.session, wire.replay_control_key(self.run_id), wire.encode_json(body),
-                                self.timeout)
-        return wire.decode_json(reply) if reply is not None else None
-
-
 class Learner:
-    def __init__(self, cfg: RunConfig, spec: EnvSpec, session: zenoh.Session, stop: threading.Event):
+    def __init__(self, cfg: RunConfig, spec: EnvSpec, links: LearnerLinks, stop: threading.Event):
         self.cfg, self.lcfg, self.spec = cfg, cfg.learner, spec
-        self.session, self.stop = session, stop
-        self.run_id = cfg.transport.run_id
+        self.links, self.stop = links, stop
         self.run_dir = Path(cfg.train.run_dir)
         self.agent = DoubleDQN(spec.schema.obs_shape, spec.schema.n_actions, cfg.learner)
-        self.replay = ReplayClient(session, cfg, spec.schema)
         self.workers = worker_names(cfg.actor.workers)
         self.metrics = MetricsLog(self.run_dir)
         self.metrics.hparams(cfg.to_dict())
         self.version = 0
         self.phase = 1 if cfg.replay.demo_mode == "rehearsal" else 0
-        self._latest = b""
-        self._pub = transport.data_publisher(session, wire.weights_key(self.run_id))
-        transport.serve_queries(session, wire.weights_latest_key(self.run_id), lambda _: self._latest, stop,
-                                "weights-latest")
-        self._episodes: collections.deque[bytes] = collections.deque(maxlen=10_000)
-        self._ep_sub = session.declare_subscriber(wire.episodes_wildcard(self.run_id),
-                                                  lambda s: self._episodes.append(s.payload.to_bytes()))
-        self._control = transport.LatestValue(session, wire.control_key(self.run_id))
-        self._stats_pub = session.declare_publisher(wire.learner_stats_key(self.run_id))
         # Running statistics for logs.
         self.returns: collections.deque[float] = collections.deque(maxlen=100)
         self.lengths: collections.deque[float] = collections.deque(maxlen=100)
@@ -100,8 +65,7 @@ class Learner:
     # ------------------------------------------------------------------ weights
 
     def publish(self) -> None:
-        self._latest = to_wire(self.agent.online, self.version, self.phase, self.agent.updates)
-        self._pub.put(self._latest)
+        self.links.publish_weights(to_wire(self.agent.online, self.version, self.phase, self.agent.updates))
 
     def checkpoint(self, name: str = "latest") -> Path:
         meta = {"version": self.version, "updates": self.agent.updates, "phase": self.phase,
@@ -130,18 +94,13 @@ class Learner:
         self._log()
         self.checkpoint("latest")
         self.checkpoint("final")
-        self._stats_pub.put(wire.encode_json({**self._status(), "done": True}))
+        self.links.publish_stats(wire.encode_json({**self._status(), "done": True}))
         self.metrics.close()
         print(f"learner: stopped after {self.agent.updates} updates, version {self.version}", flush=True)
 
     def _should_stop(self) -> bool:
-        data = self._control.take()
-        if data is not None:
-            try:
-                if wire.decode_json(data).get("cmd") == "stop":
-                    self.stop.set()
-            except wire.WireError:
-                pass
+        if self.links.stop_requested():
+            self.stop.set()
         return self.stop.is_set()
 
     def _updates(self, batch: wire.SampledBatch) -> None:
@@ -153,7 +112,7 @@ class Learner:
 
     def _fetch(self, req: wire.SampleRequest) -> wire.SampledBatch | None:
         """One sample request; on 'not ready' or no answer waits a little and returns None."""
-        result = self.replay.sample(req)
+        result = self.links.sample(req)
         if isinstance(result, wire.SampledBatch):
             return result
         delay = getattr(result, "retry_after_ms", 0) / 1000 if result is not None else 0.1
@@ -174,7 +133,7 @@ class Learner:
         if self.stop.is_set():
             return
         self.checkpoint("phase1")
-        while (reply := self.replay.control({"cmd": "set_phase", "phase": 2})) is None or not reply.get("ok"):
+        while (reply := self.links.replay_control({"cmd": "set_phase", "phase": 2})) is None or not reply.get("ok"):
             if self.stop.wait(0.2):
                 return
         # Phase 2: a new training run whose initial value is the phase-1 network.
@@ -197,7 +156,7 @@ class Learner:
         # Wait until every worker delivered a batch made with the current version ...
         req = wire.SampleRequest(self.lcfg.batch_size, self.lcfg.updates_per_round, min_version=self.version,
                                  actors=tuple(self.workers))
-        result = self.replay.sample(req)
+        result = self.links.sample(req)
         if isinstance(result, wire.WireError) and result.reason == "rate_limited":
             pass  # ... before the replay holds enough to learn, the round just advances the version
         elif not isinstance(result, wire.SampledBatch):
@@ -213,9 +172,9 @@ class Learner:
     # ------------------------------------------------------------------ logging
 
     def _drain_episodes(self) -> None:
-        while self._episodes:
+        for payload in self.links.take_episodes():
             try:
-                ep = wire.decode_json(self._episodes.popleft())
+                ep = wire.decode_json(payload)
                 ret, length = float(ep["return"]), int(ep["length"])
             except (wire.WireError, KeyError, TypeError, ValueError):
                 continue
@@ -252,11 +211,11 @@ class Learner:
 
     def _log(self) -> None:
         self._drain_episodes()
-        stats = self.replay.stats()
+        stats = self.links.replay_stats()
         if stats is not None:
             self.replay_stats = stats
         status = self._status()
-        self._stats_pub.put(wire.encode_json(status))
+        self.links.publish_stats(wire.encode_json(status))
         flat = {k: v for k, v in status.items() if isinstance(v, (int, float)) and v is not None}
         flat.update({f"version_lag_{a}": lag for a, lag in status["version_lag"].items()})
         if self.replay_stats:
@@ -279,5 +238,6 @@ def run_learner(cfg: RunConfig) -> int:
         signal.signal(sig, lambda *_: stop.set())
     spec = env_spec(cfg.env)
     with transport.open_session(cfg.transport) as session:
-        Learner(cfg, spec, session, stop).run()
+        links = ZenohLearnerLinks(session, cfg, spec.schema, stop)
+        Learner(cfg, spec, links, stop).run()
     return 0

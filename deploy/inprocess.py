@@ -1,0 +1,134 @@
+"""The same component graph in one process, for unit tests and debugging (no Ray, no zenoh).
+
+Workers and the learner run in threads and talk through in-memory links to a ReplayCore; every
+message still goes through the wire encoder and decoder, so the contract is exercised as in a
+real run. Local and cluster modes use the zenoh links instead (deploy/local.py).
+
+    >>> from laneshift.config import load_run_config
+    >>> cfg = load_run_config(overrides={"env.scenario": "lka", "train.env_steps": 2000})  # doctest: +SKIP
+    >>> result = train_inprocess(cfg)  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import collections
+import threading
+from dataclasses import dataclass, field
+
+from laneshift import wire
+from laneshift.actors.worker import EnvWorker
+from laneshift.config import RunConfig
+from laneshift.envspec import env_spec
+from laneshift.learner.loop import Learner, worker_names
+from laneshift.replay_server.core import ReplayCore
+from laneshift.replay_server.service import build_core
+
+
+@dataclass
+class Board:
+    """What the zenoh router carries in a real run: the newest weights, episodes, stop."""
+
+    core: ReplayCore
+    stop: threading.Event = field(default_factory=threading.Event)
+    cond: threading.Condition = field(default_factory=threading.Condition)
+    weights: bytes = b""
+    episodes: collections.deque = field(default_factory=lambda: collections.deque(maxlen=10_000))
+    learner_stats: dict = field(default_factory=dict)
+
+
+class InProcessActorLinks:
+    def __init__(self, board: Board, name: str):
+        self.board, self.name = board, name
+        self._seen = b""
+
+    def send_transitions(self, payload: bytes) -> None:
+        self.board.core.ingest(payload, self.name)
+
+    def send_episode(self, payload: bytes) -> None:
+        self.board.episodes.append(payload)
+
+    def latest_weights(self) -> bytes | None:
+        with self.board.cond:
+            if self.board.weights and self.board.weights is not self._seen:
+                self._seen = self.board.weights
+                return self._seen
+        return None
+
+    def wait_weights(self, timeout: float) -> bytes | None:
+        with self.board.cond:
+            if self.board.weights is self._seen:
+                self.board.cond.wait(timeout)
+        return self.latest_weights()
+
+    def wait_insert_ok(self) -> None:
+        while not self.board.core.insert_allowed() and not self.board.stop.wait(0.001):
+            pass
+
+    def stop_requested(self) -> bool:
+        return self.board.stop.is_set()
+
+
+class InProcessLearnerLinks:
+    def __init__(self, board: Board, schema: wire.TransitionSchema):
+        self.board, self.schema = board, schema
+
+    def sample(self, req: wire.SampleRequest) -> wire.SampledBatch | wire.WireError | None:
+        reply = self.board.core.handle_sample_query(wire.encode_sample_request(req))
+        if wire.peek_kind(reply) == wire.Kind.ERROR:
+            return wire.decode_error(reply)
+        return wire.decode_batch(reply, self.schema)
+
+    def replay_stats(self) -> dict | None:
+        return self.board.core.stats()
+
+    def replay_control(self, body: dict) -> dict | None:
+        return self.board.core.handle_control(body)
+
+    def publish_weights(self, payload: bytes) -> None:
+        with self.board.cond:
+            self.board.weights = payload
+            self.board.cond.notify_all()
+
+    def publish_stats(self, payload: bytes) -> None:
+        self.board.learner_stats = wire.decode_json(payload)
+
+    def take_episodes(self) -> list[bytes]:
+        out = []
+        while self.board.episodes:
+            out.append(self.board.episodes.popleft())
+        return out
+
+    def stop_requested(self) -> bool:
+        return False  # stopped through the shared event
+
+
+def train_inprocess(cfg: RunConfig) -> dict:
+    """Run workers and learner as threads until the env-step budget is spent; returns a summary."""
+    spec = env_spec(cfg.env)
+    board = Board(core=build_core(cfg))
+    learner_stop = threading.Event()
+    learner = Learner(cfg, spec, InProcessLearnerLinks(board, spec.schema), learner_stop)
+    learner_thread = threading.Thread(target=learner.run, name="learner", daemon=True)
+    learner_thread.start()
+    names = worker_names(cfg.actor.workers)
+    share = [cfg.train.env_steps // len(names) + (i < cfg.train.env_steps % len(names)) for i in range(len(names))]
+    summaries: dict[str, dict] = {}
+
+    def work(i: int, name: str) -> None:
+        worker = EnvWorker(name, i, cfg.env, cfg.actor, cfg.learner.hidden, sync=cfg.train.parallel == "sync",
+                           rehearsal=cfg.replay.demo_mode == "rehearsal")
+        try:
+            summaries[name] = worker.run(InProcessActorLinks(board, name), share[i]).as_dict()
+        finally:
+            worker.close()
+
+    threads = [threading.Thread(target=work, args=(i, n), name=n, daemon=True) for i, n in enumerate(names)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    learner_stop.set()
+    board.stop.set()
+    learner_thread.join(timeout=60)
+    return {"workers": [summaries[n] for n in names if n in summaries], "replay": board.core.stats(),
+            "learner": board.learner_stats, "updates": learner.agent.updates, "version": learner.version}

@@ -1,0 +1,87 @@
+"""The learner's seams (Acme style): the same Learner runs over zenoh or in-process.
+
+- ``sample(SampleRequest)`` -> SampledBatch, a WireError (not ready / rate limited) or None;
+- ``replay_stats()`` / ``replay_control(body)``: the replay server's stats and commands;
+- ``publish_weights(bytes)`` / ``publish_stats(bytes)``; ``take_episodes()``; ``stop_requested()``.
+"""
+
+from __future__ import annotations
+
+import collections
+import threading
+from typing import Protocol
+
+import zenoh
+
+from laneshift import transport, wire
+from laneshift.config import RunConfig
+
+
+class LearnerLinks(Protocol):
+    """The learner's seams: the replay server, the weights broadcast, episode records, control."""
+
+    def sample(self, req: wire.SampleRequest) -> wire.SampledBatch | wire.WireError | None: ...
+    def replay_stats(self) -> dict | None: ...
+    def replay_control(self, body: dict) -> dict | None: ...
+    def publish_weights(self, payload: bytes) -> None: ...
+    def publish_stats(self, payload: bytes) -> None: ...
+    def take_episodes(self) -> list[bytes]: ...
+    def stop_requested(self) -> bool: ...
+
+
+class ZenohLearnerLinks:
+    """LearnerLinks over zenoh: queries to the replay server, weights published with BLOCK."""
+
+    def __init__(self, session: zenoh.Session, cfg: RunConfig, schema: wire.TransitionSchema,
+                 stop: threading.Event):
+        self.session, self.schema = session, schema
+        self.run_id, self.timeout = cfg.transport.run_id, cfg.transport.timeout_s
+        self._latest = b""
+        self._pub = transport.data_publisher(session, wire.weights_key(self.run_id))
+        # Late joiners and reconnecting actors ask for the newest weights here.
+        transport.serve_queries(session, wire.weights_latest_key(self.run_id), lambda _: self._latest, stop,
+                                "weights-latest")
+        self._episodes: collections.deque[bytes] = collections.deque(maxlen=10_000)
+        self._ep_sub = session.declare_subscriber(wire.episodes_wildcard(self.run_id),
+                                                  lambda s: self._episodes.append(s.payload.to_bytes()))
+        self._control = transport.LatestValue(session, wire.control_key(self.run_id))
+        self._stats_pub = session.declare_publisher(wire.learner_stats_key(self.run_id))
+        self._stopped = False
+
+    def sample(self, req: wire.SampleRequest) -> wire.SampledBatch | wire.WireError | None:
+        reply = transport.query_ok(self.session, wire.sample_key(self.run_id), wire.encode_sample_request(req),
+                                   self.timeout)
+        if reply is None or isinstance(reply, wire.WireError):
+            return reply
+        return wire.decode_batch(reply, self.schema)
+
+    def replay_stats(self) -> dict | None:
+        reply = transport.query(self.session, wire.replay_stats_key(self.run_id), b"", self.timeout)
+        return wire.decode_json(reply) if reply is not None else None
+
+    def replay_control(self, body: dict) -> dict | None:
+        reply = transport.query(self.session, wire.replay_control_key(self.run_id), wire.encode_json(body),
+                                self.timeout)
+        return wire.decode_json(reply) if reply is not None else None
+
+    def publish_weights(self, payload: bytes) -> None:
+        self._latest = payload
+        self._pub.put(payload)
+
+    def publish_stats(self, payload: bytes) -> None:
+        self._stats_pub.put(payload)
+
+    def take_episodes(self) -> list[bytes]:
+        out = []
+        while self._episodes:
+            out.append(self._episodes.popleft())
+        return out
+
+    def stop_requested(self) -> bool:
+        data = self._control.take()
+        if data is not None:
+            try:
+                self._stopped |= wire.decode_json(data).get("cmd") == "stop"
+            except wire.WireError:
+                pass
+        return self._stopped

@@ -1,0 +1,31 @@
+"""The component graph in one process (threads + in-memory links): fast checks of the worker and
+learner logic, with every message still encoded and decoded by the wire contract."""
+
+from __future__ import annotations
+
+from laneshift.config import load_run_config
+from laneshift.deploy.inprocess import train_inprocess
+
+FAST = {"env.scenario": "lka", "actor.send_every": 50, "learner.hidden": "32,32", "learner.batch_size": 32,
+        "learner.publish_every": 5, "replay.min_size": 100, "replay.samples_per_insert": 4,
+        "replay.spi_tolerance": 512}
+
+
+def test_async_inprocess_respects_the_sample_to_insert_ratio(tmp_path):
+    cfg = load_run_config(overrides={**FAST, "train.env_steps": 2000, "train.run_dir": str(tmp_path)})
+    result = train_inprocess(cfg)
+    replay = result["replay"]
+    assert [w["env_steps"] for w in result["workers"]] == [1000, 1000]
+    assert replay["tables"]["online"]["inserted"] == 2000
+    # Rows sampled stay within the ratio (4 per insert after min_size) plus the tolerance.
+    assert replay["sampled_rows"] <= (2000 - 100) * 4 + 512
+    assert result["updates"] * 32 == replay["sampled_rows"]
+    assert result["version"] == result["updates"] // 5
+
+
+def test_sync_inprocess_rounds(tmp_path):
+    cfg = load_run_config(overrides={**FAST, "train.env_steps": 1000, "train.parallel": "sync",
+                                     "train.run_dir": str(tmp_path)})
+    result = train_inprocess(cfg)
+    used = [w["versions_used"] for w in result["workers"]]
+    assert used[0] == used[1] == list(range(10))
