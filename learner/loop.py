@@ -60,7 +60,7 @@ class Learner:
         self.last_update: dict[str, float] = {}
         self.replay_stats: dict = {}
         self.started = time.monotonic()
-        self._updates_at_last_log, self._time_at_last_log = 0, time.monotonic()
+        self._updates_at_last_log, self._steps_at_last_log, self._time_at_last_log = 0, 0, time.monotonic()
 
     # ------------------------------------------------------------------ weights
 
@@ -193,12 +193,14 @@ class Learner:
         now = time.monotonic()
         dt = max(now - self._time_at_last_log, 1e-6)
         ups = (self.agent.updates - self._updates_at_last_log) / dt
-        self._updates_at_last_log, self._time_at_last_log = self.agent.updates, now
         actors = self.replay_stats.get("actors", {})
         env_steps = sum(int(a.get("env_steps", 0)) for a in actors.values())
+        steps_per_s = (env_steps - self._steps_at_last_log) / dt
+        self._updates_at_last_log, self._steps_at_last_log, self._time_at_last_log = self.agent.updates, env_steps, now
         return {
             "updates": self.agent.updates, "updates_per_s": round(ups, 1), "version": self.version,
             "phase": self.phase, "episodes": self.episodes, "env_steps": env_steps,
+            "env_steps_per_s": round(steps_per_s, 1),
             "return_mean": float(np.mean(self.returns)) if self.returns else None,
             "length_mean": float(np.mean(self.lengths)) if self.lengths else None,
             "crash_rate": float(np.mean(self.crashes)) if self.crashes else None,

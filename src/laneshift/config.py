@@ -120,7 +120,9 @@ class ReplayConfig:
     capacity: int = 100_000  # total items, demo region included (retention)
     demo_mode: str = "none"  # none | retention | rehearsal (the paper's three)
     demo_ratio: float = 0.1  # retention: share of the buffer that is demos, never evicted
-    demo_paths: tuple[str, ...] = ()  # demo shards (Minari datasets) loaded at start
+    # Demo shards (Minari datasets) loaded at start. Empty with a demo mode: `train` generates the
+    # scripted demonstrator's shard; a bare replay server refuses to start.
+    demo_paths: tuple[str, ...] = ()
     min_size: int = 1_000  # online items needed before sampling (not in rehearsal phase 1)
     # Reverb-style SampleToInsertRatio: sampled rows per inserted item (0 = no ratio). With batch
     # 256, 32 means one update per 8 env steps; actors wait when the learner falls behind.
@@ -138,9 +140,6 @@ class ReplayConfig:
                "or sampling could never start", self.min_size)
         _check(self.samples_per_insert >= 0, "replay.samples_per_insert", "must be >= 0", self.samples_per_insert)
         _check(self.spi_tolerance >= 0, "replay.spi_tolerance", "must be >= 0", self.spi_tolerance)
-        if self.demo_mode != "none":
-            _check(len(self.demo_paths) > 0, "replay.demo_paths", f"demo_mode {self.demo_mode} needs a demo shard",
-                   self.demo_paths)
 
 
 @dataclass(frozen=True)
