@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from laneshift.config import EnvConfig
 from laneshift.envspec import EnvSpec
 
 from .storage import DemoTable
@@ -21,6 +22,15 @@ def load_demo_table(paths: tuple[str, ...] | list[str], spec: EnvSpec) -> DemoTa
                             obs_dtype=np.dtype(spec.schema.obs_dtype), n_actions=spec.schema.n_actions)
     except ShardError as exc:
         raise ValueError(f"replay.demo_paths: {exc}") from None
+    # Rewards and action meanings depend on these: a shard made under others would teach wrong values.
+    # A kwarg not given when recording means the env's default, which EnvConfig's defaults mirror.
+    defaults = {"reward_preset": EnvConfig.reward_preset, "action_set": EnvConfig.action_set}
+    recorded = {**defaults, **(shard.metadata.get("env_kwargs") or {})}
+    run_kwargs = {**defaults, **dict(spec.env_kwargs)}
+    for key in defaults if "reward_preset" in dict(spec.env_kwargs) else ():  # lane-change envs only
+        if recorded[key] != run_kwargs[key]:
+            raise ValueError(f"replay.demo_paths: the demo shard was recorded with {key}={recorded[key]!r}, "
+                             f"the run uses {key}={run_kwargs[key]!r}")
     return DemoTable(obs=np.ascontiguousarray(shard.observations),
                      action=np.asarray(shard.actions, np.int64),
                      reward=np.asarray(shard.rewards, np.float32),

@@ -84,3 +84,38 @@ def test_inspect_refuses_a_corrupted_shard(shard_dir: Path, tmp_path: Path, caps
 def test_generate_refuses_existing_output(shard_dir: Path, capsys) -> None:
     assert main(["generate", "--scenario", "lka", "--episodes", "1", "--out", str(shard_dir)]) == 2
     assert "refusing to overwrite" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("observation, max_steps", [("vector", 40), ("grayscale", 12)])
+def test_generate_straight_with_the_scripted_driver(tmp_path: Path, capsys, observation: str,
+                                                    max_steps: int) -> None:
+    """The CLI path end to end on the real straight scenario and ScriptedDriver."""
+    from laneshift.actors.envs import make_env
+    from laneshift.actors.envs.demonstrator import ScriptedDriver
+
+    out = tmp_path / observation
+    assert main(["generate", "--scenario", "straight", "--episodes", "2", "--out", str(out),
+                 "--seed", "3", "--observation", observation, "--max-steps", str(max_steps)]) == 0
+    assert "demonstrator survival" in capsys.readouterr().out
+    shard = load_shard(out, env_id="laneshift/StraightLaneChange-v0", n_actions=9)
+    meta = shard.metadata
+    assert meta["env_kwargs"] == {"observation": observation, "max_steps": max_steps}
+    assert meta["demonstrator"].endswith("demonstrator.ScriptedDriver")
+    assert meta["obs_encoding"] == ("frame_stack" if observation == "grayscale" else "full")
+    assert meta["survival_rate"] is not None and meta["achievement_rate"] is not None
+
+    env = make_env("straight", observation=observation, max_steps=max_steps)
+    env.action_space.seed(3)
+    row = 0
+    for episode, seed in enumerate([3, 4]):
+        obs, _ = env.reset(seed=seed)
+        driver, done = ScriptedDriver(env), False
+        while not done:
+            action = driver(obs)
+            np.testing.assert_array_equal(shard.observations[row], obs)
+            obs, reward, term, trunc, _ = env.step(action)
+            assert (shard.actions[row], shard.rewards[row], shard.episode_ids[row]) == \
+                (action, np.float32(reward), episode)
+            np.testing.assert_array_equal(shard.next_observations[row], obs)
+            done, row = term or trunc, row + 1
+    assert row == len(shard)

@@ -154,7 +154,8 @@ class StackEnv(gym.Env):
         return self.stack, float(action), False, done, info
 
 
-gym.register("laneshift-test/Stack-v0", entry_point=StackEnv)
+if "laneshift-test/Stack-v0" not in gym.registry:
+    gym.register("laneshift-test/Stack-v0", entry_point=StackEnv)
 
 
 def _cycle_policy(env: gym.Env):
@@ -336,3 +337,34 @@ def test_human_shard_keeps_the_given_actions(tmp_path: Path) -> None:
     assert shard.actions.tolist() == [0, 30, 15, 2] and shard.episode_ids.tolist() == [0, 0, 0, 1]
     assert shard.metadata["recorded_by"] == "human" and shard.metadata["seeds"] == [None, 5]
     assert shard.metadata["survival_rate"] is None  # no infos given: unknown, not invented
+
+
+def test_write_into_an_existing_empty_directory(tmp_path: Path) -> None:
+    (tmp_path / "empty").mkdir()
+    path = write_shard(tmp_path / "empty", [_episode([1, 2])], env_id=LKA, env_kwargs={},
+                       recorded_by="human", seeds=[0])
+    assert load_shard(path).actions.tolist() == [1, 2]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["empty"]  # no staging left over
+
+
+def test_extra_metadata_cannot_override_core_fields(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="must not override sha256"):
+        write_shard(tmp_path / "x", [_episode([1])], env_id=LKA, env_kwargs={},
+                    recorded_by="human", seeds=[0], extra_metadata={"sha256": "0" * 64})
+
+
+def test_plain_minari_reads_frame_stack_shards(tmp_path: Path) -> None:
+    import minari
+
+    path = generate_shard(tmp_path / "s", env_id_or_scenario="laneshift-test/Stack-v0",
+                          env_kwargs={}, episodes=2, seed=4, policy=_cycle_policy)
+    shard = load_shard(path)
+    dataset = minari.MinariDataset(dataset_data_dir(path))
+    assert dataset.observation_space.shape == (12, 10)  # the newest frame of each stack
+    for episode in dataset.iterate_episodes():
+        rows = shard.episode_ids == episode.id
+        np.testing.assert_array_equal(episode.observations[:-1], shard.observations[rows][:, -1])
+        with h5py.File(dataset_data_dir(path) / "main_data.hdf5") as f:
+            prefix = f[f"episode_{episode.id}/laneshift_stack_prefix"][()]
+        np.testing.assert_array_equal(rebuild_frame_stacks(prefix, episode.observations)[:-1],
+                                      shard.observations[rows])

@@ -1,0 +1,177 @@
+"""``laneshift demos ...`` sub-commands: generate, record, inspect.
+
+The lead's CLI calls :func:`register` on the ``demos`` sub-parsers; each sub-command sets
+``func(args) -> int``. Standalone: ``python -m laneshift.demos.cli generate ...``.
+
+Example::
+
+    laneshift demos generate --scenario straight --episodes 50 --out runs/demos/straight
+    laneshift demos record --scenario straight --episodes 20 --out runs/demos/human
+    laneshift demos inspect runs/demos/straight        # also writes runs/demos/straight_returns.png
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from .shard import ShardError
+
+
+def _json_or_str(text: str) -> Any:
+    """JSON when it parses (numbers, true, null, lists), else the text itself."""
+    try:
+        return json.loads(text)
+    except ValueError:
+        return text
+
+
+def _kwarg(text: str) -> tuple[str, Any]:
+    """``KEY=VALUE`` -> (key, value), VALUE through :func:`_json_or_str`."""
+    key, sep, value = text.partition("=")
+    if not sep or not key:
+        raise argparse.ArgumentTypeError(f"expected KEY=VALUE, got {text!r}")
+    return key, _json_or_str(value)
+
+
+def env_kwargs_from_args(args: argparse.Namespace) -> dict[str, Any]:
+    """The flat env kwargs given on the command line (only those given: env defaults apply)."""
+    kwargs: dict[str, Any] = dict(args.env_kwarg or [])
+    for name in ("observation", "max_steps", "reward_preset", "initial_lane"):
+        value = getattr(args, name, None)
+        if value is not None:
+            kwargs[name] = value
+    return kwargs
+
+
+def _add_env_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--scenario", required=True,
+                        help="scenario name (straight, merge, curve, roundabout, lka) or gymnasium id")
+    parser.add_argument("--observation", choices=("vector", "grayscale"),
+                        help="observation type (default: the env's)")
+    parser.add_argument("--max-steps", type=int, help="episode length limit (env kwarg max_steps)")
+    parser.add_argument("--reward-preset", help="reward condition (env kwarg reward_preset)")
+    parser.add_argument("--initial-lane", type=_json_or_str,
+                        help="initial lane (env kwarg initial_lane)")
+    parser.add_argument("--env-kwarg", type=_kwarg, action="append", metavar="KEY=VALUE",
+                        help="any other env kwarg (repeatable; VALUE parsed as JSON if it can be)")
+
+
+def _cmd_generate(args: argparse.Namespace) -> int:
+    from .generate import generate_shard
+    from .shard import read_metadata
+
+    try:
+        path = generate_shard(args.out, env_id_or_scenario=args.scenario,
+                              env_kwargs=env_kwargs_from_args(args), episodes=args.episodes,
+                              seed=args.seed)
+    except (FileExistsError, ValueError) as exc:  # bad arguments / existing output
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    meta = read_metadata(path)
+    print(f"wrote {path}: {meta['episodes']} episodes, {meta['steps']} steps of {meta['env_id']} "
+          f"in {meta.get('generation_seconds', float('nan')):.1f} s; demonstrator survival "
+          f"{_rate(meta.get('survival_rate'))}, achievement {_rate(meta.get('achievement_rate'))}")
+    return 0
+
+
+def _rate(rate: float | None) -> str:
+    return "n/a" if rate is None else f"{100 * rate:.1f} %"
+
+
+def _cmd_record(args: argparse.Namespace) -> int:
+    from .record import record_shard
+
+    try:
+        path = record_shard(args.out, env_id_or_scenario=args.scenario,
+                            env_kwargs=env_kwargs_from_args(args), episodes=args.episodes,
+                            seed=args.seed, fps=args.fps, scale=args.scale)
+    except (FileExistsError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if path is None:
+        print("no episode was completed: nothing written", file=sys.stderr)
+        return 1
+    from .shard import read_metadata
+
+    meta = read_metadata(path)
+    print(f"wrote {path}: {meta['episodes']} human episodes, {meta['steps']} steps "
+          f"({meta.get('discarded_episodes', 0)} discarded); survival "
+          f"{_rate(meta.get('survival_rate'))}, achievement {_rate(meta.get('achievement_rate'))}")
+    return 0
+
+
+def _cmd_inspect(args: argparse.Namespace) -> int:
+    from .inspection import format_summary, plot_returns, summarize
+    from .shard import read_verified
+
+    try:
+        episodes = read_verified(args.shard)  # checksum verified; no flat copy of the obs
+    except ShardError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    summary = summarize(episodes)
+    directory = Path(args.shard).absolute()
+    png = Path(args.png) if args.png else directory.with_name(f"{directory.name}_returns.png")
+    summary["returns_png"] = str(plot_returns(summary, png))
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        print(format_summary(summary))
+        print(f"return plot  {summary['returns_png']}")
+    return 0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the demos sub-commands (``generate``, ``record``, ``inspect``) to ``subparsers``."""
+    generate = subparsers.add_parser(
+        "generate", help="record scripted-driver demonstrations into a demo shard",
+        description="Run the scripted demonstrator and write a demo shard (Minari dataset).")
+    _add_env_arguments(generate)
+    generate.add_argument("--episodes", type=int, required=True)
+    generate.add_argument("--out", required=True,
+                          help="shard directory to create (must not exist or be empty)")
+    generate.add_argument("--seed", type=int, default=0,
+                          help="episode i is reset with seed SEED+i (default 0)")
+    generate.set_defaults(func=_cmd_generate)
+
+    record = subparsers.add_parser(
+        "record", help="drive with the keyboard and record human demonstrations",
+        description="Open a window and record keyboard-driven episodes: arrows = speed +/- and "
+                    "turn left/right (combinations allowed), P pause, Backspace discard the "
+                    "episode, Esc/Q quit (completed episodes are saved).")
+    _add_env_arguments(record)
+    record.add_argument("--episodes", type=int, required=True)
+    record.add_argument("--out", required=True,
+                        help="shard directory to create (must not exist or be empty)")
+    record.add_argument("--seed", type=int, default=0,
+                        help="episode attempt k is reset with seed SEED+k (default 0)")
+    record.add_argument("--fps", type=float,
+                        help="env steps per second (default: the env's render_fps)")
+    record.add_argument("--scale", type=float, default=1.0, help="window zoom factor")
+    record.set_defaults(func=_cmd_record)
+
+    inspect = subparsers.add_parser(
+        "inspect", help="summarise a demo shard and plot its return distribution",
+        description="Verify a demo shard and print episodes, steps, returns, success rates "
+                    "and the action histogram; write a PNG of the episode returns.")
+    inspect.add_argument("shard", help="shard directory")
+    inspect.add_argument("--png", help="where to write the return histogram "
+                                       "(default: DIR_returns.png next to the shard)")
+    inspect.add_argument("--json", action="store_true", help="print the summary as JSON")
+    inspect.set_defaults(func=_cmd_inspect)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Standalone entry point: ``python -m laneshift.demos.cli {generate,record,inspect} ...``."""
+    parser = argparse.ArgumentParser(prog="laneshift demos")
+    register(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(argv)
+    return int(args.func(args))
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,53 @@
+"""Resolve and build the environments demonstrations are recorded in.
+
+The demos package never hard-codes an environment: it takes a gymnasium id (or one of
+laneshift's scenario short names) plus flat env kwargs. laneshift's own ids are registered by
+importing ``laneshift.actors.envs``; any other registered gymnasium id works as well.
+
+Example::
+
+    >>> resolve_env_id("CartPole-v1")
+    'CartPole-v1'
+    >>> env = make_env("CartPole-v1", {})
+    >>> env.action_space.n
+    np.int64(2)
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+import gymnasium as gym
+
+
+def _laneshift_envs() -> Any | None:
+    """The ``laneshift.actors.envs`` module (registers the laneshift ids), or None if absent."""
+    try:
+        return importlib.import_module("laneshift.actors.envs")
+    except ImportError:
+        return None
+
+
+def scenarios() -> dict[str, str]:
+    """laneshift's scenario short names -> gymnasium ids (empty if the envs are not installed)."""
+    module = _laneshift_envs()
+    return dict(getattr(module, "SCENARIOS", {}) or {})
+
+
+def resolve_env_id(env_id_or_scenario: str) -> str:
+    """Map a scenario short name (``straight``) to its gymnasium id; pass ids through."""
+    return scenarios().get(env_id_or_scenario, env_id_or_scenario)
+
+
+def make_env(env_id: str, env_kwargs: dict[str, Any], **extra: Any) -> gym.Env:
+    """Build ``env_id`` with ``env_kwargs`` (plus ``extra`` such as ``render_mode``).
+
+    laneshift ids go through ``laneshift.actors.envs.make_env`` so the env is built exactly as
+    the actors build it; other ids through ``gymnasium.make``.
+    """
+    module = _laneshift_envs()
+    kwargs = {**env_kwargs, **extra}
+    if module is not None and env_id in scenarios().values() and hasattr(module, "make_env"):
+        return module.make_env(env_id, **kwargs)
+    return gym.make(env_id, **kwargs)
