@@ -1,0 +1,615 @@
+"""The paper's lane-change environments (figure 3 (a)-(d)) on highway-env's road and vehicle models.
+
+One class, :class:`LaneChangeEnv`, parameterised by a scenario layout (scenarios.py); the four
+registered ids are its subclasses.  Per step (``policy_frequency`` Hz, default 10 Hz):
+
+1. the ego action is decoded - paper action (dv, kappa) or a highway-env meta action;
+2. policy vehicles (copies of the agent) get their own vector observations and act through the
+   function given to :meth:`LaneChangeEnv.set_npc_policy` (without one they keep their lane at
+   constant speed);
+3. ``simulation_frequency / policy_frequency`` sub-steps: highway-env kinematic bicycle for the
+   ego and policy vehicles, exact lane following for the constant-speed traffic, and collision /
+   off-road checks of the ego and policy vehicles against everything;
+4. reward (Table 1 preset, rewards.py), observation, info.
+
+The episode terminates when the ego vehicle collides or leaves the road, and is truncated after
+``max_steps`` steps.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from highway_env.road.road import Road
+from highway_env.vehicle.controller import ControlledVehicle
+from highway_env.vehicle.kinematics import Vehicle
+
+from . import scenarios
+from .actions import META_ACTIONS, SPEED_CHANGES, curvature_to_steering, paper_actions
+from .control import curvature_index, lane_errors, meta_acceleration, meta_steering
+from .observations import OBS_LIMIT, vector_observation, vector_size
+from .rendering import TopDownRenderer
+from .rewards import DEFAULT_REWARD_PRESET, REWARD_TERM_NAMES, compute_reward, get_preset, motion_flags
+from .traffic import AgentVehicle, Traffic, collisions, locate
+
+NpcPolicy = Callable[[np.ndarray], Sequence[int] | np.ndarray]
+
+#: Default meta-action speed grid [m/s] (highway-env's default 20-30 m/s is faster than this traffic).
+META_TARGET_SPEEDS = (6.0, 8.0, 10.0, 12.0, 14.0, 16.0, 18.0)
+#: Smallest distance [m] from the ego vehicle at which policy vehicles start or re-enter.
+POLICY_SPAWN_DISTANCE = 40.0
+
+
+def _int_arg(name: str, value: Any, lo: int, hi: int | None = None) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ValueError(f"{name} must be an int, got {value!r}")
+    if value < lo or (hi is not None and value > hi):
+        raise ValueError(f"{name} must be in [{lo}, {hi if hi is not None else 'inf'}], got {value!r}")
+    return int(value)
+
+
+def _float_arg(name: str, value: Any, lo: float, hi: float = math.inf, lo_open: bool = False) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(v) or v < lo or v > hi or (lo_open and v == lo):
+        raise ValueError(f"{name} must be in {'(' if lo_open else '['}{lo}, {hi}], got {value!r}")
+    return v
+
+
+class LaneChangeEnv(gym.Env):
+    """Lane change towards a target lane among constant-speed (and policy-driven) traffic.
+
+    All options are flat constructor keyword arguments (see docs/environments.md for the table).
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+
+    SCENARIO = "straight"
+    DEFAULT_MAX_STEPS = 300
+    DEFAULT_VEHICLES = 30
+
+    def __init__(
+        self,
+        observation: str = "vector",
+        reward_preset: int = DEFAULT_REWARD_PRESET,
+        max_steps: int | None = None,
+        initial_lane: str | int = "random",
+        target_lane: int | str | None = None,
+        action_set: str = "paper",
+        vehicles_count: int | None = None,
+        lanes_count: int | None = None,
+        lane_speeds: Sequence[float] | None = None,
+        policy_vehicles: int = 0,
+        observation_shape: Sequence[int] = (100, 100),
+        stack_size: int = 4,
+        scaling: float = 2.0,
+        vehicles_observed: int = 8,
+        speed_step: float = 0.1,
+        curvature_step: float = 0.01,
+        ego_speed_spread: float = 2.0,
+        min_gap: float = 12.0,
+        ego_clearance: float = 20.0,
+        policy_frequency: int = 10,
+        simulation_frequency: int = 10,
+        meta_target_speeds: Sequence[float] = META_TARGET_SPEEDS,
+        render_mode: str | None = None,
+    ) -> None:
+        super().__init__()
+        # ---- validation (ValueError naming the argument) ------------------------------------
+        if observation not in ("vector", "grayscale"):
+            raise ValueError(f"observation must be 'vector' or 'grayscale', got {observation!r}")
+        self.preset = get_preset(reward_preset)
+        if action_set not in ("paper", "meta"):
+            raise ValueError(f"action_set must be 'paper' or 'meta', got {action_set!r}")
+        lo, hi, default_lanes = scenarios.LANES_RANGE[self.SCENARIO]
+        n_lanes = default_lanes if lanes_count is None else _int_arg("lanes_count", lanes_count, lo, hi)
+        self.layout = scenarios.BUILDERS[self.SCENARIO](n_lanes)
+        n_all = self.layout.lanes_count
+        self.max_steps = self.DEFAULT_MAX_STEPS if max_steps is None else _int_arg("max_steps", max_steps, 1)
+        if initial_lane not in ("random", "non-target") and not (
+            isinstance(initial_lane, (int, np.integer)) and not isinstance(initial_lane, bool)
+            and int(initial_lane) in self.layout.spawn_lanes
+        ):
+            raise ValueError(
+                f"initial_lane must be 'random', 'non-target' or a lane in {self.layout.spawn_lanes}, got {initial_lane!r}"
+            )
+        self.initial_lane = initial_lane
+        if target_lane is None:
+            target_lane = self.layout.default_target
+        if target_lane != "random":
+            target_lane = _int_arg("target_lane", target_lane, 0, n_all - 1)
+        self.target_lane_option = target_lane
+        self.vehicles_count = _int_arg(
+            "vehicles_count", self.DEFAULT_VEHICLES if vehicles_count is None else vehicles_count, 0
+        )
+        speeds = scenarios.default_lane_speeds(len(self.layout.npc_lanes)) if lane_speeds is None else list(lane_speeds)
+        if len(speeds) != len(self.layout.npc_lanes):
+            raise ValueError(f"lane_speeds needs {len(self.layout.npc_lanes)} values (one per traffic lane), got {speeds!r}")
+        for v in speeds:
+            _float_arg("lane_speeds", v, 0.0, AgentVehicle.MAX_SPEED)
+        self.lane_speeds = np.zeros(n_all)
+        self.lane_speeds[self.layout.npc_lanes] = speeds
+        self.policy_vehicles = _int_arg("policy_vehicles", policy_vehicles, 0, self.vehicles_count)
+        shape = tuple(observation_shape) if isinstance(observation_shape, (list, tuple)) else None
+        if shape is None or len(shape) != 2 or any(isinstance(d, bool) or not isinstance(d, (int, np.integer)) or d < 8 for d in shape):
+            raise ValueError(f"observation_shape must be two ints >= 8 (height, width), got {observation_shape!r}")
+        self.observation_shape = (int(shape[0]), int(shape[1]))
+        self.stack_size = _int_arg("stack_size", stack_size, 1)
+        self.scaling = _float_arg("scaling", scaling, 0.0, lo_open=True)
+        self.vehicles_observed = _int_arg("vehicles_observed", vehicles_observed, 0)
+        self.speed_step = _float_arg("speed_step", speed_step, 0.0)
+        self.curvature_step = _float_arg("curvature_step", curvature_step, 0.0, 2.0 / Vehicle.LENGTH)
+        self.ego_speed_spread = _float_arg("ego_speed_spread", ego_speed_spread, 0.0)
+        self.min_gap = _float_arg("min_gap", min_gap, Vehicle.LENGTH)
+        self.ego_clearance = _float_arg("ego_clearance", ego_clearance, Vehicle.LENGTH)
+        self.policy_frequency = _int_arg("policy_frequency", policy_frequency, 1)
+        self.simulation_frequency = _int_arg("simulation_frequency", simulation_frequency, 1)
+        if self.simulation_frequency % self.policy_frequency:
+            raise ValueError(
+                f"simulation_frequency ({simulation_frequency}) must be a multiple of policy_frequency ({policy_frequency})"
+            )
+        self.meta_target_speeds = np.asarray([_float_arg("meta_target_speeds", v, 0.0, AgentVehicle.MAX_SPEED) for v in meta_target_speeds])
+        if self.meta_target_speeds.size == 0:
+            raise ValueError("meta_target_speeds must not be empty")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
+        self.render_mode = render_mode
+        self.observation_type = observation
+        self.action_set = action_set
+
+        # ---- spaces ---------------------------------------------------------------------------
+        self.actions = paper_actions(self.speed_step, self.curvature_step)
+        self.action_space = spaces.Discrete(len(self.actions) if action_set == "paper" else len(META_ACTIONS))
+        self.vector_dim = vector_size(self.vehicles_observed)
+        self.vector_space = spaces.Box(-OBS_LIMIT, OBS_LIMIT, shape=(self.vector_dim,), dtype=np.float32)
+        if observation == "vector":
+            self.observation_space = self.vector_space
+        else:
+            self.observation_space = spaces.Box(0, 255, shape=(self.stack_size, *self.observation_shape), dtype=np.uint8)
+
+        # ---- simulation objects -----------------------------------------------------------------
+        self.dt = 1.0 / self.simulation_frequency
+        self.substeps = self.simulation_frequency // self.policy_frequency
+        self.traffic = Traffic(self.layout, list(self.lane_speeds), self.layout.window_back, self.layout.window_front)
+        self.road = Road(network=self.layout.network)
+        self.ego: AgentVehicle | None = None
+        self.agents: list[AgentVehicle] = []
+        self.npc_policy: NpcPolicy | None = None
+        self.target_lane = 0
+        self.steps = 0
+        self.time = 0.0
+        self.anchor = np.zeros(n_all)
+        self._frames: np.ndarray | None = None
+        self._obs_renderer: TopDownRenderer | None = None
+        self._rgb_renderer: TopDownRenderer | None = None
+        self._last_info: dict[str, Any] = {}
+
+    # ------------------------------------------------------------------------------------------
+    # public helpers
+    # ------------------------------------------------------------------------------------------
+    def set_npc_policy(self, fn: NpcPolicy | None) -> None:
+        """Drive the policy vehicles with ``fn``: float32 [N, obs_dim] vector observations (each
+        from that vehicle's own perspective, one row per active policy vehicle, so N <= the
+        ``policy_vehicles`` kwarg) -> int actions [N] of this env's action set.  Policy vehicles
+        always get the vector observation, also when the ego observation is ``"grayscale"``.
+        ``None`` restores the default (keep lane at constant speed)."""
+        if fn is not None and not callable(fn):
+            raise ValueError(f"fn must be callable or None, got {fn!r}")
+        self.npc_policy = fn
+
+    @property
+    def vehicle(self) -> AgentVehicle | None:
+        """The ego vehicle (highway-env's name for it)."""
+        return self.ego
+
+    def npc_vehicles(self) -> list[Vehicle]:
+        """The constant-speed traffic as highway-env `Vehicle` objects (a snapshot, for inspection)."""
+        out = []
+        for x, y, h, v in zip(self.traffic.x, self.traffic.y, self.traffic.h, self.traffic.speed):
+            veh = Vehicle(None, [x, y], float(h), float(v))
+            veh.road = self.road
+            out.append(veh)
+        return out
+
+    def lane_occupants(self, lane: int, exclude: AgentVehicle | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(arc length on ``lane``, speed) of every vehicle whose body overlaps ``lane``
+        (constant-speed traffic on it, plus agents within a lane width of its centre)."""
+        mask = self.traffic.lane == lane
+        s, v = [self.traffic.s[mask]], [self.traffic.speed[mask]]
+        for a in [self.ego, *self.agents]:
+            if a is None or a is exclude or not a.active or a.loc is None:
+                continue
+            if a.loc.inside[lane] and abs(a.loc.lat[lane]) < self.layout.paths[lane].width - 0.5:
+                s.append(np.array([a.loc.s[lane]]))
+                v.append(np.array([a.speed * math.cos(a.heading - a.loc.heading[lane])]))
+        return np.concatenate(s), np.concatenate(v)
+
+    def lane_gap(self, lane: int, s_from: float, s_to: float) -> float:
+        """Signed arc-length difference s_to - s_from on ``lane`` (wrapped on rings)."""
+        d = s_to - s_from
+        path = self.layout.paths[lane]
+        if path.closed:
+            d = (d + path.length / 2) % path.length - path.length / 2
+        return d
+
+    # ------------------------------------------------------------------------------------------
+    # gymnasium API
+    # ------------------------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        super().reset(seed=seed)
+        options = dict(options or {})
+        unknown = set(options) - {"initial_lane", "target_lane"}
+        if unknown:
+            raise ValueError(f"options: unknown keys {sorted(unknown)} (allowed: initial_lane, target_lane)")
+        rng = self.np_random
+        layout = self.layout
+        target = options.get("target_lane", self.target_lane_option)
+        if target == "random":
+            target = int(rng.choice(layout.spawn_lanes))
+        self.target_lane = _int_arg("target_lane", target, 0, layout.lanes_count - 1)
+        initial = options.get("initial_lane", self.initial_lane)
+        if initial == "random":
+            lane = int(rng.choice(layout.spawn_lanes))
+        elif initial == "non-target":
+            choices = [lane for lane in layout.spawn_lanes if lane != self.target_lane]
+            if not choices:
+                raise ValueError("initial_lane: 'non-target' but the target is the only lane")
+            lane = int(rng.choice(choices))
+        elif isinstance(initial, (int, np.integer)) and int(initial) in layout.spawn_lanes:
+            lane = int(initial)
+        else:
+            raise ValueError(f"initial_lane: invalid {initial!r}")
+
+        # Ego vehicle at the lane's start station, aligned with it.
+        path = layout.paths[lane]
+        s0 = layout.start_s[lane]
+        x, y, h = (float(a[0]) for a in path.position(np.array([s0])))
+        base_speed = self.lane_speeds[lane] if lane in layout.npc_lanes else self.lane_speeds[layout.ramp_speed_lane]
+        speed = float(base_speed + rng.uniform(-self.ego_speed_spread, self.ego_speed_spread))
+        self.ego = AgentVehicle(layout, x, y, h, max(speed, 0.0), kind="ego")
+        self.ego.road = self.road
+        self._locate(self.ego)
+        self.anchor = np.array(self.ego.loc.s)
+
+        # Constant-speed traffic, evenly split over the traffic lanes.
+        npc_lanes = layout.npc_lanes
+        split = np.full(len(npc_lanes), self.vehicles_count // len(npc_lanes))
+        split[: self.vehicles_count % len(npc_lanes)] += 1
+        per_lane = dict(zip(npc_lanes, split.tolist()))
+        self.traffic.populate(rng, per_lane, list(self.anchor), lane, self.min_gap, self.ego_clearance)
+        self.traffic.place(self.anchor)
+
+        # Policy vehicles replace randomly chosen traffic vehicles away from the ego vehicle.
+        self.agents = []
+        if self.policy_vehicles:
+            rel = np.array([self.lane_gap(int(ln), self.anchor[ln], s) for ln, s in zip(self.traffic.lane, self.traffic.s)])
+            far = np.flatnonzero(np.abs(rel) >= POLICY_SPAWN_DISTANCE)
+            if far.size < self.policy_vehicles:
+                far = np.argsort(-np.abs(rel))[: self.policy_vehicles]
+            chosen = rng.choice(far, size=self.policy_vehicles, replace=False)
+            for j in chosen:
+                agent = AgentVehicle(
+                    layout, float(self.traffic.x[j]), float(self.traffic.y[j]), float(self.traffic.h[j]),
+                    float(self.traffic.speed[j]), kind="policy",
+                )
+                agent.road = self.road
+                agent.hints = [p.segment_at(float(self.traffic.s[j])) for p in layout.paths]
+                self._locate(agent)
+                self.agents.append(agent)
+            self.traffic.remove(chosen)
+            self.traffic.place(self.anchor)
+        self.road.vehicles = [self.ego, *self.agents]
+        for v in self.road.vehicles:
+            v.meta_lane = v.loc.lane
+            v.meta_speed_index = int(np.argmin(np.abs(self.meta_target_speeds - v.speed)))
+
+        self.steps = 0
+        self.time = 0.0
+        self._frames = None
+        obs = self._observe()
+        info = self._info(crashed=False, collided=False, terms=None)
+        return obs, info
+
+    def step(self, action: int) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        if self.ego is None:
+            raise RuntimeError("call reset() before step()")
+        a = int(action)
+        if not 0 <= a < self.action_space.n:
+            raise ValueError(f"action must be in [0, {self.action_space.n}), got {action!r}")
+        agent_actions = self._policy_actions()
+        self._command(self.ego, a)
+        for agent, act in zip(self.agents, agent_actions):
+            if agent.active:
+                self._command(agent, int(act))
+
+        collided = offroad = False
+        for _ in range(self.substeps):
+            if self.action_set == "meta":
+                for v in (self.ego, *self.agents):
+                    if v.active:
+                        self._meta_control(v)
+            self.ego.step(self.dt)
+            for agent in self.agents:
+                if agent.active:
+                    agent.step(self.dt)
+            self.traffic.advance(self.dt)
+            self._locate(self.ego)
+            for i, s in enumerate(self.ego.loc.s):
+                self.anchor[i] = s
+            self.traffic.place(self.anchor)
+            collided, offroad = self._check_ego()
+            self._check_agents()
+            if collided or offroad:
+                break
+        self.steps += 1
+        self.time += 1.0 / self.policy_frequency
+
+        crashed = collided or offroad
+        self.ego.crashed = crashed
+        loc = self.ego.loc
+        forward_speed = self.ego.speed * math.cos(self.ego.heading - loc.heading[loc.lane])
+        moving, stopped = motion_flags(self.ego.speed, forward_speed)
+        reward, terms = compute_reward(
+            self.preset, crashed=crashed, moving_forward=moving, stopped=stopped,
+            on_target_lane=loc.lane == self.target_lane,
+        )
+        obs = self._observe()
+        terminated = crashed
+        truncated = (not terminated) and self.steps >= self.max_steps
+        info = self._info(crashed=crashed, collided=collided, terms=terms, offroad=offroad)
+        return obs, reward, terminated, truncated, info
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode != "rgb_array" or self.ego is None:
+            return None
+        if self._rgb_renderer is None:
+            self._rgb_renderer = TopDownRenderer(self.layout, (300, 600), 5.0, grayscale=False)
+        return self._draw(self._rgb_renderer)
+
+    def close(self) -> None:
+        self._obs_renderer = self._rgb_renderer = None
+
+    # ------------------------------------------------------------------------------------------
+    # internals
+    # ------------------------------------------------------------------------------------------
+    def _locate(self, v: AgentVehicle) -> None:
+        v.loc = locate(self.layout, float(v.position[0]), float(v.position[1]), v.hints)
+
+    def _command(self, v: AgentVehicle, action: int) -> None:
+        if self.action_set == "paper":
+            dv, kappa = self.actions[action]
+            # Paper curvature is left-positive; highway-env's world heading grows to the right.
+            v.action = {
+                "steering": curvature_to_steering(-kappa, v.LENGTH),
+                "acceleration": dv * self.policy_frequency,
+            }
+            return
+        label = META_ACTIONS[action]
+        if label in ("LANE_LEFT", "LANE_RIGHT"):
+            # Like highway-env's is_reachable_from: only a lane adjacent to the current target lane.
+            cand = v.meta_lane + (-1 if label == "LANE_LEFT" else 1)
+            loc = v.loc
+            if 0 <= cand < self.layout.lanes_count and loc.inside[cand]:
+                width = self.layout.paths[cand].width
+                if abs(abs(loc.lat[cand] - loc.lat[v.meta_lane]) - width) < 0.5:
+                    v.meta_lane = cand
+        elif label == "FASTER":
+            v.meta_speed_index = min(v.meta_speed_index + 1, self.meta_target_speeds.size - 1)
+        elif label == "SLOWER":
+            v.meta_speed_index = max(v.meta_speed_index - 1, 0)
+
+    def _meta_control(self, v: AgentVehicle) -> None:
+        lane = v.meta_lane
+        path = self.layout.paths[lane]
+        s_ahead = v.loc.s[lane] + v.speed * ControlledVehicle.TAU_PURSUIT
+        v.action = {
+            "steering": meta_steering(v.loc.lat[lane], path.heading_at(s_ahead), v.heading, v.speed, v.LENGTH),
+            "acceleration": meta_acceleration(float(self.meta_target_speeds[v.meta_speed_index]), v.speed),
+        }
+
+    def _policy_actions(self) -> list[int]:
+        """One action per policy vehicle (inactive ones get 0 and are not simulated)."""
+        active = [i for i, a in enumerate(self.agents) if a.active]
+        actions = [0] * len(self.agents)
+        if not active:
+            return actions
+        if self.npc_policy is None:
+            for i in active:
+                actions[i] = self._keep_lane_action(self.agents[i])
+            return actions
+        batch = np.stack([self._vector_obs(self.agents[i]) for i in active])
+        out = np.asarray(self.npc_policy(batch)).reshape(-1)
+        if out.size != len(active):
+            raise ValueError(f"npc policy returned {out.size} actions for {len(active)} observations")
+        for i, act in zip(active, out):
+            act = int(act)
+            if not 0 <= act < self.action_space.n:
+                raise ValueError(f"npc policy returned action {act}, outside [0, {self.action_space.n})")
+            actions[i] = act
+        return actions
+
+    def _keep_lane_action(self, v: AgentVehicle) -> int:
+        if not v.active:
+            return 0
+        if self.action_set == "meta":
+            return 1  # IDLE
+        offset, rel, curv = lane_errors(v.loc, v.loc.lane, v.heading)
+        k = curvature_index(offset, rel, curv, v.speed / self.policy_frequency, self.curvature_step)
+        return 3 * SPEED_CHANGES.index(0) + k
+
+    def _others(self, exclude: AgentVehicle) -> tuple[np.ndarray, ...]:
+        t = self.traffic
+        extra = [a for a in (self.ego, *self.agents) if a is not exclude and a.active]
+        if not extra:
+            return t.x, t.y, t.h, t.speed, t.lane
+        return (
+            np.concatenate([t.x, [a.position[0] for a in extra]]),
+            np.concatenate([t.y, [a.position[1] for a in extra]]),
+            np.concatenate([t.h, [a.heading for a in extra]]),
+            np.concatenate([t.speed, [a.speed for a in extra]]),
+            np.concatenate([t.lane, [a.loc.lane for a in extra]]),
+        )
+
+    def _vector_obs(self, v: AgentVehicle) -> np.ndarray:
+        ox, oy, oh, ov, ol = self._others(v)
+        return vector_observation(
+            float(v.position[0]), float(v.position[1]), v.heading, v.speed, v.loc,
+            self.layout.paths[v.loc.lane].width, self.layout.lanes_count, self.target_lane, self.curvature_step,
+            ox, oy, oh, ov, ol, self.vehicles_observed,
+        )
+
+    def _observe(self) -> np.ndarray:
+        if self.observation_type == "vector":
+            return self._vector_obs(self.ego)
+        if self._obs_renderer is None:
+            self._obs_renderer = TopDownRenderer(self.layout, self.observation_shape, self.scaling, grayscale=True)
+        frame = self._draw(self._obs_renderer)
+        if self._frames is None:  # first frame of an episode fills the whole stack
+            self._frames = np.repeat(frame[None], self.stack_size, axis=0)
+        else:
+            self._frames = np.roll(self._frames, -1, axis=0)
+            self._frames[-1] = frame
+        return self._frames.copy()
+
+    def _draw(self, renderer: TopDownRenderer) -> np.ndarray:
+        t = self.traffic
+        agents = [a for a in self.agents if a.active]
+        vehicles = [(t.x, t.y, t.h, "npc")]
+        if agents:
+            vehicles.append((
+                np.array([a.position[0] for a in agents]), np.array([a.position[1] for a in agents]),
+                np.array([a.heading for a in agents]), "policy",
+            ))
+        e = self.ego
+        vehicles.append((np.array([e.position[0]]), np.array([e.position[1]]), np.array([e.heading]), "ego"))
+        return renderer.render((float(e.position[0]), float(e.position[1])), self.target_lane, vehicles, Vehicle.LENGTH, Vehicle.WIDTH)
+
+    def _check_ego(self) -> tuple[bool, bool]:
+        e = self.ego
+        t = self.traffic
+        hit = collisions(float(e.position[0]), float(e.position[1]), e.heading, e.LENGTH, e.WIDTH, t.x, t.y, t.h)
+        collided = hit.size > 0
+        for a in self.agents:
+            if a.active and collisions(
+                float(e.position[0]), float(e.position[1]), e.heading, e.LENGTH, e.WIDTH,
+                a.position[:1], a.position[1:], np.array([a.heading]),
+            ).size:
+                collided = True
+                a.crashed = True
+        offroad = not e.loc.on_road
+        e.offroad = offroad
+        return collided, offroad
+
+    def _check_agents(self) -> None:
+        if not self.agents:
+            return
+        t = self.traffic
+        for a in self.agents:
+            if not a.active:
+                continue
+            self._locate(a)
+            x, y = float(a.position[0]), float(a.position[1])
+            crashed = a.crashed or not a.loc.on_road
+            if not crashed:
+                crashed = collisions(x, y, a.heading, a.LENGTH, a.WIDTH, t.x, t.y, t.h).size > 0
+            if not crashed:
+                for b in self.agents:
+                    if b is not a and b.active and collisions(
+                        x, y, a.heading, a.LENGTH, a.WIDTH, b.position[:1], b.position[1:], np.array([b.heading])
+                    ).size:
+                        crashed = b.crashed = True
+            lane = a.loc.lane
+            path = self.layout.paths[lane]
+            out = False
+            if not path.closed:
+                rel = a.loc.s[lane] - self.anchor[lane]
+                out = rel < -self.traffic.back or rel > self.traffic.front
+            if crashed or out:
+                self._respawn(a)
+
+    def _respawn(self, a: AgentVehicle) -> None:
+        """Put a crashed / out-of-window policy vehicle back on a free spot away from the ego vehicle."""
+        rng = self.np_random
+        layout = self.layout
+        lanes = [ln for ln in layout.npc_lanes if ln in layout.spawn_lanes]
+        a.crashed = False
+        for _ in range(10):
+            lane = int(rng.choice(lanes))
+            path = layout.paths[lane]
+            if path.closed:
+                rel = rng.uniform(POLICY_SPAWN_DISTANCE, path.length - POLICY_SPAWN_DISTANCE)
+            else:
+                side = rng.integers(2)
+                lo, hi = (POLICY_SPAWN_DISTANCE, self.traffic.front - 10.0) if side else (-self.traffic.back + 10.0, -POLICY_SPAWN_DISTANCE)
+                rel = rng.uniform(lo, hi)
+            s = self.anchor[lane] + rel
+            occ_s, _ = self.lane_occupants(lane, exclude=a)
+            if occ_s.size and np.min(np.abs([self.lane_gap(lane, s, o) for o in occ_s])) < self.min_gap:
+                continue
+            x, y, h = (float(v[0]) for v in path.position(np.array([s])))
+            a.position = np.array([x, y])
+            a.heading = h
+            a.speed = float(self.lane_speeds[lane])
+            a.hints = [p.segment_at(s) if p is path else a.hints[i] for i, p in enumerate(layout.paths)]
+            a.action = {"steering": 0.0, "acceleration": 0.0}
+            self._locate(a)
+            a.meta_lane = a.loc.lane
+            a.meta_speed_index = int(np.argmin(np.abs(self.meta_target_speeds - a.speed)))
+            return
+        a.active = False  # no free spot: the vehicle leaves the scene
+
+    def _info(self, *, crashed: bool, collided: bool, terms: dict[str, float] | None, offroad: bool = False) -> dict[str, Any]:
+        loc = self.ego.loc
+        if terms is None:  # reset: no step taken yet
+            terms = dict.fromkeys(REWARD_TERM_NAMES, 0.0)
+        return {
+            "crashed": bool(crashed),
+            "collided": bool(collided),
+            "offroad": bool(offroad),
+            "on_target_lane": bool(loc.lane == self.target_lane),
+            "lane_index": int(loc.lane),
+            "target_lane": int(self.target_lane),
+            "speed": float(self.ego.speed),
+            "reward_terms": terms,
+            "steps": self.steps,
+            "policy_vehicles_active": sum(a.active for a in self.agents),
+        }
+
+
+class StraightLaneChangeEnv(LaneChangeEnv):
+    """Fig. 3(a), the evaluation task: straight road, 300-step episodes by default."""
+
+    SCENARIO = "straight"
+    DEFAULT_MAX_STEPS = 300
+    DEFAULT_VEHICLES = 30
+
+
+class MergeLaneChangeEnv(LaneChangeEnv):
+    """Fig. 3(b): merge from an ending on-ramp into the main road (reward-study length 100)."""
+
+    SCENARIO = "merge"
+    DEFAULT_MAX_STEPS = 100
+    DEFAULT_VEHICLES = 20
+
+
+class CurveLaneChangeEnv(LaneChangeEnv):
+    """Fig. 3(c): lane change on a winding road (reward-study length 100)."""
+
+    SCENARIO = "curve"
+    DEFAULT_MAX_STEPS = 100
+    DEFAULT_VEHICLES = 30
+
+
+class RoundaboutLaneChangeEnv(LaneChangeEnv):
+    """Fig. 3(d): lane change on a multi-lane ring (reward-study length 100)."""
+
+    SCENARIO = "roundabout"
+    DEFAULT_MAX_STEPS = 100
+    DEFAULT_VEHICLES = 96

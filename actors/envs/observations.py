@@ -1,0 +1,109 @@
+"""The vector observation (default): a flat float32 vector computed with numpy, no pandas.
+
+Layout (``EGO_FEATURES`` then ``vehicles_observed`` blocks of ``OTHER_FEATURES``), all in the
+observer's frame with "left" positive, as in the paper's action convention:
+
+ego block
+    speed / 20 m/s; sin and cos of the heading relative to the nearest lane; lateral offset from
+    that lane's centre / (lane width / 2) (+ = left); lane index / (lanes - 1); lanes to the
+    target lane (lane index - target index) / (lanes - 1) (+ = target is on the left); on-target
+    flag; distances to the left and right edges of the paved area / 10 m; lane curvature /
+    curvature_step (+ = bends left); distance to the end of the lane / 100 m (capped at 1: only
+    the merge ramp ends).
+other vehicles (the K nearest within 60 m, nearest first; absent slots are all zero)
+    presence; dx, dy / 50 m (dx forward, dy left); dvx, dvy / 10 m/s (relative velocity in the
+    observer's frame); sin of the relative heading (+ = pointing left of the observer); lane
+    difference (observer lane - other lane) / 2 (+ = other is on the left).
+
+Every feature is clipped to [-5, 5], the bounds of the observation space.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .traffic import Loc
+
+EGO_FEATURES = (
+    "speed",
+    "sin_heading",
+    "cos_heading",
+    "lateral",
+    "lane",
+    "lanes_to_target",
+    "on_target",
+    "left_edge",
+    "right_edge",
+    "lane_curvature",
+    "lane_end",
+)
+OTHER_FEATURES = ("presence", "dx", "dy", "dvx", "dvy", "sin_dheading", "lane_delta")
+OBS_LIMIT = 5.0
+SPEED_SCALE, DIST_SCALE, REL_SPEED_SCALE, EDGE_SCALE, END_SCALE = 20.0, 50.0, 10.0, 10.0, 100.0
+PERCEPTION_RANGE = 60.0
+
+
+def vector_size(vehicles_observed: int) -> int:
+    return len(EGO_FEATURES) + vehicles_observed * len(OTHER_FEATURES)
+
+
+def vector_observation(
+    x: float,
+    y: float,
+    heading: float,
+    speed: float,
+    loc: Loc,
+    lane_width: float,
+    lanes_count: int,
+    target_lane: int,
+    curvature_step: float,
+    others_x: np.ndarray,
+    others_y: np.ndarray,
+    others_h: np.ndarray,
+    others_v: np.ndarray,
+    others_lane: np.ndarray,
+    k: int,
+) -> np.ndarray:
+    """Observation of one vehicle; ``others_*`` must not contain the observer itself."""
+    out = np.zeros(vector_size(k), dtype=np.float32)
+    span = max(1, lanes_count - 1)
+    rel_heading = (heading - loc.heading[loc.lane] + math.pi) % (2 * math.pi) - math.pi
+    # World heading/lateral/curvature grow to the right (y points down): negate for "left +".
+    ego = (
+        speed / SPEED_SCALE,
+        -math.sin(rel_heading),
+        math.cos(rel_heading),
+        -loc.lat[loc.lane] / (lane_width / 2),
+        loc.lane / span,
+        (loc.lane - target_lane) / span,
+        float(loc.lane == target_lane),
+        loc.left_edge / EDGE_SCALE,
+        loc.right_edge / EDGE_SCALE,
+        -loc.curvature[loc.lane] / curvature_step,
+        min(loc.lane_end, END_SCALE) / END_SCALE,
+    )
+    out[: len(ego)] = ego
+    if k and others_x.size:
+        dx, dy = others_x - x, others_y - y
+        d2 = dx * dx + dy * dy
+        idx = np.flatnonzero(d2 < PERCEPTION_RANGE**2)
+        if idx.size:
+            idx = idx[np.argsort(d2[idx], kind="stable")[:k]]
+            c, s = math.cos(heading), math.sin(heading)
+            dx, dy = dx[idx], dy[idx]
+            vx = others_v[idx] * np.cos(others_h[idx]) - speed * c
+            vy = others_v[idx] * np.sin(others_h[idx]) - speed * s
+            block = np.empty((idx.size, len(OTHER_FEATURES)), dtype=np.float64)
+            block[:, 0] = 1.0
+            block[:, 1] = (dx * c + dy * s) / DIST_SCALE
+            block[:, 2] = (dx * s - dy * c) / DIST_SCALE  # left of the observer: -n = (sin h, -cos h)
+            block[:, 3] = (vx * c + vy * s) / REL_SPEED_SCALE
+            block[:, 4] = (vx * s - vy * c) / REL_SPEED_SCALE
+            block[:, 5] = -np.sin(others_h[idx] - heading)
+            block[:, 6] = (loc.lane - others_lane[idx]) / 2.0
+            start = len(EGO_FEATURES)
+            out[start : start + block.size] = block.ravel()
+    np.clip(out, -OBS_LIMIT, OBS_LIMIT, out=out)
+    return out
