@@ -231,8 +231,8 @@ class ReplayCore:
     def stats(self) -> dict[str, Any]:
         with self._lock:
             online_size = self.online.size
-            demo_in_buffer = self.demo.size
-            total = online_size + (demo_in_buffer if self.mode == "retention" or self.phase == 1 else 0)
+            demo_in_buffer = self.demo.size if self.mode == "retention" or self.phase == 1 else 0
+            total = online_size + demo_in_buffer
             recent_rows = sum(r for r, _ in self._recent)
             recent_demo = sum(d for _, d in self._recent)
             return {

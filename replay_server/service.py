@@ -64,7 +64,10 @@ class ReplayService:
             except ValueError:
                 self.core._reject("bad_key")
                 continue
-            self.core.ingest(sample.payload.to_bytes(), actor)
+            try:
+                self.core.ingest(sample.payload.to_bytes(), actor)
+            except Exception:  # noqa: BLE001 - a bug must cost one message, never the ingest thread
+                self.core._reject("internal_error")
 
     def _flow_loop(self, period_s: float = 0.01, heartbeat_s: float = 0.25) -> None:
         """Tell actors whether they may insert: on every change, and as a heartbeat."""

@@ -29,7 +29,7 @@ class RingTable:
         self.terminated = np.zeros(self.capacity, np.uint8)
         self.truncated = np.zeros(self.capacity, np.uint8)
         self.actor = np.zeros(self.capacity, np.int16)  # index into the server's actor list
-        self.version = np.zeros(self.capacity, np.int32)  # weights version that acted
+        self.version = np.zeros(self.capacity, np.int64)  # weights version that acted
         self.inserted = 0  # total items ever inserted (the next item's key)
 
     @property

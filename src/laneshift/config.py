@@ -94,7 +94,6 @@ class ActorConfig:
     epsilon_decay_rate: float = 1e-4  # exponential: eps *= (1 - rate) per step (MATLAB EpsilonDecay)
     apex_epsilon: float = 0.4  # apex: eps_i = apex_epsilon ** (1 + apex_alpha * i / (N - 1))
     apex_alpha: float = 7.0
-    weights_poll_s: float = 0.0  # async: 0 = pick up the newest weights between send batches
     torch_threads: int = 1
     seed: int = 0
 
@@ -111,6 +110,8 @@ class ActorConfig:
         _check(0.0 <= self.epsilon_decay_rate < 1.0, "actor.epsilon_decay_rate", "must be in [0, 1)",
                self.epsilon_decay_rate)
         _check(self.torch_threads >= 1, "actor.torch_threads", "must be >= 1", self.torch_threads)
+        _check(self.apex_alpha >= 0, "actor.apex_alpha", "must be >= 0", self.apex_alpha)  # also refuses NaN
+        _check(self.seed >= 0, "actor.seed", "must be >= 0", self.seed)
 
 
 @dataclass(frozen=True)
@@ -140,6 +141,7 @@ class ReplayConfig:
                "or sampling could never start", self.min_size)
         _check(self.samples_per_insert >= 0, "replay.samples_per_insert", "must be >= 0", self.samples_per_insert)
         _check(self.spi_tolerance >= 0, "replay.spi_tolerance", "must be >= 0", self.spi_tolerance)
+        _check(self.seed >= 0, "replay.seed", "must be >= 0", self.seed)
 
 
 @dataclass(frozen=True)
@@ -176,6 +178,7 @@ class LearnerConfig:
         _check(self.huber_delta > 0, "learner.huber_delta", "must be > 0", self.huber_delta)
         _check(self.grad_clip > 0, "learner.grad_clip", "must be > 0", self.grad_clip)
         _check(self.weight_decay >= 0, "learner.weight_decay", "must be >= 0", self.weight_decay)
+        _check(self.seed >= 0, "learner.seed", "must be >= 0", self.seed)
 
 
 @dataclass(frozen=True)
@@ -191,7 +194,7 @@ class TransportConfig:
                "must be a zenoh endpoint like tcp/127.0.0.1:7447", self.router)
         from .wire import _NAME  # the same rule as key expressions
 
-        _check(bool(_NAME.match(self.run_id)), "transport.run_id", "must match [A-Za-z0-9_-]{1,64}", self.run_id)
+        _check(bool(_NAME.fullmatch(self.run_id)), "transport.run_id", "must match [A-Za-z0-9_-]{1,64}", self.run_id)
         _check(self.timeout_s > 0, "transport.timeout_s", "must be > 0", self.timeout_s)
 
 
@@ -211,6 +214,7 @@ class TrainConfig:
         _check(self.parallel in ("async", "sync"), "train.parallel", "must be async or sync", self.parallel)
         _check(self.log_every_s > 0, "train.log_every_s", "must be > 0", self.log_every_s)
         _check(self.eval_episodes >= 0, "train.eval_episodes", "must be >= 0", self.eval_episodes)
+        _check(self.seed >= 0, "train.seed", "must be >= 0", self.seed)
 
 
 @dataclass(frozen=True)

@@ -78,7 +78,7 @@ class WireError(ValueError):
 
 
 def _check_name(kind: str, value: str) -> str:
-    if not isinstance(value, str) or not _NAME.match(value):
+    if not isinstance(value, str) or not _NAME.fullmatch(value):
         raise ValueError(f"{kind} {value!r} must match [A-Za-z0-9_-]{{1,64}}")
     return value
 
@@ -157,7 +157,7 @@ def encode(kind: Kind, header: Mapping[str, Any], arrays: Mapping[str, np.ndarra
     arrays = arrays or {}
     table, blobs = [], []
     for name, arr in arrays.items():
-        arr = np.ascontiguousarray(arr)
+        arr = np.ascontiguousarray(arr).reshape(np.shape(arr))  # ascontiguousarray makes 0-d arrays 1-d
         code = _dtype_code(arr)
         arr = arr.astype(code, copy=False)
         table.append({"name": name, "dtype": code, "shape": list(arr.shape)})
@@ -203,8 +203,9 @@ def decode(data: bytes | bytearray | memoryview, expect: Kind | None = None) -> 
     if len(buf) < end:
         raise WireError("truncated", f"header needs {end} bytes, message has {len(buf)}")
     try:
-        header = json.loads(bytes(buf[_ENVELOPE.size:end]).decode("utf-8"), parse_constant=_reject_constant)
-    except (UnicodeDecodeError, json.JSONDecodeError, ValueError) as exc:
+        header = json.loads(bytes(buf[_ENVELOPE.size:end]).decode("utf-8"), parse_constant=_reject_constant,
+                            parse_float=_finite_float)
+    except (UnicodeDecodeError, json.JSONDecodeError, ValueError, RecursionError) as exc:
         raise WireError("bad_header", f"header is not valid JSON: {exc}") from None
     if not isinstance(header, dict) or not isinstance(header.get("arrays"), list):
         raise WireError("bad_header", "header must be an object with an 'arrays' list")
@@ -225,13 +226,20 @@ def _reject_constant(name: str) -> None:
     raise ValueError(f"{name} is not allowed in headers")
 
 
+def _finite_float(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(f"number {text[:20]} overflows to infinity")
+    return value
+
+
 def _read_array(buf: memoryview, spec: Any, offset: int) -> tuple[str, np.ndarray, int]:
     if not isinstance(spec, dict) or set(spec) != {"name", "dtype", "shape"}:
         raise WireError("bad_header", f"array entry {spec!r} must have exactly name, dtype, shape")
     name, code, shape = spec["name"], spec["dtype"], spec["shape"]
-    if not isinstance(name, str) or not _NAME.match(name):
+    if not isinstance(name, str) or not _NAME.fullmatch(name):
         raise WireError("bad_header", f"bad array name {name!r}")
-    if code not in ALLOWED_DTYPES:
+    if not isinstance(code, str) or code not in ALLOWED_DTYPES:
         raise WireError("bad_dtype", f"array {name!r}: dtype {code!r} not allowed")
     if (not isinstance(shape, list) or len(shape) > 8
             or not all(isinstance(d, int) and not isinstance(d, bool) and 0 <= d < 2**31 for d in shape)):
@@ -245,10 +253,15 @@ def _read_array(buf: memoryview, spec: Any, offset: int) -> tuple[str, np.ndarra
     return name, arr, offset + nbytes
 
 
+MAX_COUNTER = 2**53  # header integers stay exact in any JSON implementation
+
+
 def _require(header: dict, name: str, typ: type | tuple, reason: str = "bad_header") -> Any:
     value = header.get(name)
     if not isinstance(value, typ) or isinstance(value, bool) and typ is not bool:
         raise WireError(reason, f"header field {name!r} must be {getattr(typ, '__name__', typ)}, got {value!r}")
+    if typ is int and not -MAX_COUNTER < value < MAX_COUNTER:
+        raise WireError(reason, f"header field {name!r} out of range: {value}")
     return value
 
 
@@ -312,7 +325,7 @@ def decode_transitions(data: bytes | bytearray | memoryview, schema: TransitionS
     msg = decode(data, expect=Kind.TRANSITIONS)
     h = msg.header
     actor = _require(h, "actor", str)
-    if not _NAME.match(actor):
+    if not _NAME.fullmatch(actor):
         raise WireError("bad_header", f"bad actor name {actor!r}")
     ints = {k: _require(h, k, int) for k in ("seq", "weights_version", "phase", "env_steps")}
     if any(v < 0 for v in ints.values()):
@@ -350,7 +363,7 @@ def decode_transitions(data: bytes | bytearray | memoryview, schema: TransitionS
 # --------------------------------------------------------------------------- weights (safetensors)
 
 _ST_DTYPES = {"F64": "<f8", "F32": "<f4", "F16": "<f2", "I64": "<i8", "I32": "<i4", "I16": "<i2",
-              "I8": "|i1", "U8": "|u1", "BOOL": "|b1"}
+              "I8": "|i1", "U8": "|u1", "U16": "<u2", "U32": "<u4", "BOOL": "|b1"}
 _ST_CODES = {v: k for k, v in _ST_DTYPES.items()}
 
 
@@ -361,7 +374,7 @@ def safetensors_dumps(tensors: Mapping[str, np.ndarray], metadata: Mapping[str, 
         header["__metadata__"] = {str(k): str(v) for k, v in metadata.items()}
     blobs, offset = [], 0
     for name in sorted(tensors):
-        arr = np.ascontiguousarray(tensors[name])
+        arr = np.ascontiguousarray(tensors[name]).reshape(np.shape(tensors[name]))
         code = _dtype_code(arr)
         raw = arr.astype(code, copy=False).tobytes()
         header[name] = {"dtype": _ST_CODES[code], "shape": list(arr.shape), "data_offsets": [offset, offset + len(raw)]}
@@ -382,11 +395,13 @@ def safetensors_loads(data: bytes | bytearray | memoryview) -> tuple[dict[str, n
         raise WireError("bad_weights", f"safetensors header length {hlen} out of range")
     try:
         header = json.loads(bytes(buf[8:8 + hlen]).decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+    except (UnicodeDecodeError, ValueError, RecursionError) as exc:
         raise WireError("bad_weights", f"safetensors header is not JSON: {exc}") from None
     if not isinstance(header, dict):
         raise WireError("bad_weights", "safetensors header is not an object")
     meta = header.pop("__metadata__", {}) or {}
+    if not isinstance(meta, dict) or not all(isinstance(k, str) and isinstance(v, str) for k, v in meta.items()):
+        raise WireError("bad_weights", "safetensors __metadata__ must map strings to strings")
     data_start, data_len = 8 + hlen, len(buf) - 8 - hlen
     tensors, spans = {}, []
     for name, spec in header.items():
@@ -407,7 +422,7 @@ def safetensors_loads(data: bytes | bytearray | memoryview) -> tuple[dict[str, n
     spans.sort()
     if any(a[1] > b[0] for a, b in zip(spans, spans[1:])):
         raise WireError("bad_weights", "tensors overlap")
-    return tensors, {str(k): str(v) for k, v in dict(meta).items()}
+    return tensors, dict(meta)
 
 
 @dataclass(frozen=True)
@@ -429,7 +444,8 @@ def decode_weights(data: bytes | bytearray | memoryview) -> Weights:
     ints = {k: _require(msg.header, k, int) for k in ("version", "phase", "updates")}
     if ints["version"] < 0:
         raise WireError("bad_header", "negative weights version")
-    if set(msg.arrays) != {"safetensors"} or msg.arrays["safetensors"].ndim != 1:
+    blob = msg.arrays.get("safetensors")
+    if set(msg.arrays) != {"safetensors"} or blob.ndim != 1 or blob.dtype.str != "|u1":
         raise WireError("bad_arrays", "weights carry exactly one 1-D uint8 array 'safetensors'")
     tensors, _ = safetensors_loads(msg.arrays["safetensors"].tobytes())
     return Weights(tensors=tensors, **ints)
@@ -463,7 +479,7 @@ def decode_sample_request(data: bytes | bytearray | memoryview) -> SampleRequest
     msg = decode(data, expect=Kind.SAMPLE_REQUEST)
     h = msg.header
     actors = h.get("actors", [])
-    if not isinstance(actors, list) or not all(isinstance(x, str) and _NAME.match(x) for x in actors):
+    if not isinstance(actors, list) or not all(isinstance(x, str) and _NAME.fullmatch(x) for x in actors):
         raise WireError("bad_request", f"bad actors list {actors!r}")
     return SampleRequest(batch_size=_require(h, "batch_size", int, "bad_request"),
                          num_batches=_require(h, "num_batches", int, "bad_request"),
@@ -498,6 +514,8 @@ def decode_batch(data: bytes | bytearray | memoryview, schema: TransitionSchema)
     msg = decode(data, expect=Kind.BATCH)
     if set(msg.arrays) != set(_BATCH_FIELDS):
         raise WireError("bad_arrays", f"batch arrays {sorted(msg.arrays)}")
+    if msg.arrays["action"].ndim != 1:
+        raise WireError("bad_shape", f"batch action must be 1-D, got shape {msg.arrays['action'].shape}")
     rows = msg.arrays["action"].shape[0]
     for name in ("obs", "next_obs"):
         if msg.arrays[name].shape != (rows, *schema.obs_shape) or msg.arrays[name].dtype.str != schema.obs_dtype:
@@ -545,5 +563,8 @@ def peek_kind(data: bytes | bytearray | memoryview) -> Kind | None:
 def decode_error(data: bytes | bytearray | memoryview) -> WireError:
     msg = decode(data, expect=Kind.ERROR)
     err = WireError(str(msg.header.get("reason", "error")), str(msg.header.get("detail", "")))
-    err.retry_after_ms = int(msg.header.get("retry_after_ms", 0) or 0)  # type: ignore[attr-defined]
+    retry = msg.header.get("retry_after_ms", 0)
+    if not isinstance(retry, int) or isinstance(retry, bool) or not 0 <= retry <= 60_000:
+        raise WireError("bad_header", f"retry_after_ms must be an integer in [0, 60000], got {retry!r}")
+    err.retry_after_ms = retry  # type: ignore[attr-defined]
     return err

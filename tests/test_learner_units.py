@@ -1,0 +1,298 @@
+"""Learner and actor building blocks: Double DQN updates, weights on the wire and on disk,
+exploration schedules and the epsilon-greedy policy. Tiny nets, CPU, seeded, no sleeps."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+from safetensors.torch import load_file
+
+from laneshift import wire
+from laneshift.actors.exploration import make_schedule
+from laneshift.actors.policy import QPolicy
+from laneshift.config import ActorConfig, LearnerConfig
+from laneshift.learner.dqn import DoubleDQN
+from laneshift.learner.networks import build_q_network
+from laneshift.learner.weights import load_checkpoint, load_into, save_checkpoint, tensors_digest, to_wire
+
+torch.set_num_threads(1)
+
+
+def _cfg(**kw) -> LearnerConfig:
+    return LearnerConfig(**{"hidden": (16,), "batch_size": 8, "seed": 0, **kw})
+
+
+def _last_linear(net: torch.nn.Module) -> torch.nn.Linear:
+    return [m for m in net.modules() if isinstance(m, torch.nn.Linear)][-1]
+
+
+@torch.no_grad()
+def _set_constant_q(net: torch.nn.Module, values: list[float]) -> None:
+    """Make the network output ``values`` for every input (last layer: zero weights, bias = values)."""
+    last = _last_linear(net)
+    last.weight.zero_()
+    last.bias.copy_(torch.tensor(values))
+
+
+def _batch(obs, action, reward, next_obs, terminated) -> dict[str, np.ndarray]:
+    return {"obs": np.asarray(obs, np.float32), "action": np.asarray(action, np.int64),
+            "reward": np.asarray(reward, np.float32), "next_obs": np.asarray(next_obs, np.float32),
+            "terminated": np.asarray(terminated, np.uint8), "weight": np.ones(len(action), np.float32)}
+
+
+# --------------------------------------------------------------------------- Double DQN
+
+
+def test_converges_to_true_q_values_on_a_two_state_problem():
+    """States A=[1,0], B=[0,1]; gamma 0.9.
+    A: action 0 -> reward 1, terminal; action 1 -> reward 0, next state B.
+    B: action 0 -> reward 2, terminal; action 1 -> reward -1, terminal.
+    True Q: Q(B,0)=2, Q(B,1)=-1, Q(A,0)=1, Q(A,1)=0.9*max Q(B)=1.8."""
+    A, B = [1, 0], [0, 1]
+    batch = _batch(obs=[A, A, B, B], action=[0, 1, 0, 1], reward=[1, 0, 2, -1], next_obs=[A, B, A, A],
+                   terminated=[1, 0, 1, 1])
+    agent = DoubleDQN((2,), 2, _cfg(hidden=(32,), lr=1e-2, gamma=0.9, target_update_period=20, huber_delta=10.0))
+    for _ in range(400):
+        agent.update(batch)
+    with torch.no_grad():
+        q = agent.online(torch.tensor([A, B], dtype=torch.float32)).numpy()
+    np.testing.assert_allclose(q, [[1.0, 1.8], [2.0, -1.0]], atol=1e-3)
+    assert agent.greedy(np.array([A, B], np.float32)).tolist() == [1, 0]
+    assert agent.updates == 400
+
+
+def _td_target(double: bool) -> float:
+    """One update on a constructed case; returns the TD target the update used."""
+    agent = DoubleDQN((2,), 2, _cfg(double=double, gamma=0.5, target_update_period=1000))
+    _set_constant_q(agent.online, [1.0, 0.0])  # online argmax at s' = action 0
+    _set_constant_q(agent.target, [5.0, 10.0])  # target argmax at s' = action 1
+    out = agent.update(_batch(obs=[[0, 0]], action=[0], reward=[0], next_obs=[[1, 1]], terminated=[0]))
+    # One row: td_abs = |q - target| with q = online(s)[0] = 1 below every candidate target.
+    return 1.0 + out["td_abs"]
+
+
+def test_double_dqn_online_chooses_target_values():
+    assert _td_target(double=True) == pytest.approx(0.5 * 5.0)  # target's value of the online argmax
+
+
+def test_vanilla_dqn_takes_the_target_max():
+    assert _td_target(double=False) == pytest.approx(0.5 * 10.0)
+
+
+def test_terminal_transitions_do_not_bootstrap():
+    agent = DoubleDQN((2,), 2, _cfg(gamma=0.99))
+    _set_constant_q(agent.online, [0.0, 0.0])
+    _set_constant_q(agent.target, [100.0, 100.0])
+    out = agent.update(_batch(obs=[[0, 0]], action=[1], reward=[3], next_obs=[[0, 0]], terminated=[1]))
+    assert out["td_abs"] == pytest.approx(3.0) and out["q_mean"] == pytest.approx(0.0)
+
+
+def test_target_sync_period():
+    agent = DoubleDQN((3,), 2, _cfg(target_update_period=5, lr=1e-2))
+    rng = np.random.default_rng(0)
+    b = _batch(obs=rng.normal(size=(8, 3)), action=rng.integers(0, 2, 8), reward=rng.normal(size=8),
+               next_obs=rng.normal(size=(8, 3)), terminated=np.zeros(8))
+
+    def same() -> bool:
+        o, t = agent.online.state_dict(), agent.target.state_dict()
+        return all(torch.equal(o[k], t[k]) for k in o)
+
+    assert same()  # the target starts as a copy
+    frozen = {k: v.clone() for k, v in agent.target.state_dict().items()}
+    for i in range(1, 11):
+        agent.update(b)
+        if i % 5 == 0:
+            assert same(), i
+            frozen = {k: v.clone() for k, v in agent.target.state_dict().items()}
+        else:
+            assert not same(), i
+            assert all(torch.equal(frozen[k], v) for k, v in agent.target.state_dict().items()), i
+    assert not any(p.requires_grad for p in agent.target.parameters())
+
+
+def test_gradient_clipping_bound_holds():
+    agent = DoubleDQN((3,), 2, _cfg(grad_clip=0.5, huber_delta=1e6, lr=1e-6))
+    b = _batch(obs=np.full((8, 3), 10.0), action=np.zeros(8), reward=np.full(8, 1e4), next_obs=np.zeros((8, 3)),
+               terminated=np.ones(8))
+    out = agent.update(b)
+    assert out["grad_norm"] > 10.0  # before clipping, far above the bound
+    total = math.sqrt(sum(float(p.grad.norm()) ** 2 for p in agent.online.parameters()))
+    assert total <= 0.5 + 1e-5
+
+
+def test_importance_weights_scale_the_loss():
+    def loss(w: float) -> float:
+        agent = DoubleDQN((2,), 2, _cfg())
+        b = _batch(obs=[[0, 1]], action=[0], reward=[1], next_obs=[[0, 1]], terminated=[1])
+        b["weight"] = np.array([w], np.float32)
+        return agent.update(b)["loss"]
+
+    assert loss(0.0) == 0.0 and loss(3.0) == pytest.approx(3 * loss(1.0))
+
+
+def test_reset_optimizer_syncs_target_and_is_deterministic():
+    a, b = DoubleDQN((4,), 3, _cfg()), DoubleDQN((4,), 3, _cfg())
+    assert tensors_digest({k: v.numpy() for k, v in a.online.state_dict().items()}) == tensors_digest(
+        {k: v.numpy() for k, v in b.online.state_dict().items()})  # seeded init
+    with torch.no_grad():
+        for p in a.online.parameters():
+            p.add_(1.0)
+    a.reset_optimizer()
+    assert all(torch.equal(a.online.state_dict()[k], v) for k, v in a.target.state_dict().items())
+
+
+# --------------------------------------------------------------------------- weights
+
+
+def _net(hidden=(8, 8), obs=4, n=3, seed=0) -> torch.nn.Module:
+    torch.manual_seed(seed)
+    return build_q_network((obs,), n, hidden)
+
+
+def _arrays(net: torch.nn.Module) -> dict[str, np.ndarray]:
+    return {k: v.detach().numpy().copy() for k, v in net.state_dict().items()}
+
+
+def test_to_wire_decode_load_into_round_trip():
+    src, dst = _net(seed=1), _net(seed=2)
+    assert tensors_digest(_arrays(src)) != tensors_digest(_arrays(dst))
+    w = wire.decode_weights(to_wire(src, version=7, phase=2, updates=1234))
+    assert (w.version, w.phase, w.updates) == (7, 2, 1234)
+    load_into(dst, w.tensors)
+    assert tensors_digest(_arrays(dst)) == tensors_digest(_arrays(src))
+    x = torch.randn(5, 4)
+    assert torch.equal(src(x), dst(x))
+
+
+def test_load_into_is_strict():
+    net = _net()
+    good = _arrays(net)
+    with pytest.raises(ValueError, match="do not match"):
+        load_into(net, {k: v for k, v in good.items() if k != "net.0.bias"})
+    with pytest.raises(ValueError, match="do not match"):
+        load_into(net, {**good, "extra": np.zeros(1, np.float32)})
+    with pytest.raises(ValueError, match="shape"):
+        load_into(net, {**good, "net.0.weight": np.zeros((8, 5), np.float32)})
+    with pytest.raises(ValueError):
+        load_into(net, _arrays(_net(hidden=(16,))))
+    before = tensors_digest(_arrays(net))
+    assert tensors_digest(_arrays(net)) == before == tensors_digest(good)  # refusals changed nothing
+
+
+def test_policy_refuses_weights_for_another_network():
+    p = QPolicy((4,), 3, hidden=(8, 8))
+    with pytest.raises(ValueError):
+        p.load(wire.decode_weights(to_wire(_net(hidden=(16,)), 1, 0, 0)))
+    assert p.version == -1
+
+
+def test_checkpoint_save_load(tmp_path):
+    net = _net(seed=3)
+    path = save_checkpoint(net, tmp_path / "ck" / "latest.safetensors", {"version": 4, "updates": 99, "lr": 0.5})
+    assert path.exists() and not path.with_suffix(".tmp").exists()
+    tensors, meta = load_checkpoint(path)
+    assert meta == {"version": "4", "updates": "99", "lr": "0.5"}
+    assert tensors_digest(tensors) == tensors_digest(_arrays(net))
+    # a plain safetensors file: the reference loader reads it
+    loaded = load_file(str(path))
+    assert set(loaded) == set(net.state_dict())
+    for k, v in net.state_dict().items():
+        assert torch.equal(loaded[k], v)
+    fresh = _net(seed=9)
+    fresh.load_state_dict(loaded)
+    assert torch.equal(fresh(torch.ones(1, 4)), net(torch.ones(1, 4)))
+
+
+def test_checkpoint_overwrite_is_atomic_replace(tmp_path):
+    path = tmp_path / "c.safetensors"
+    save_checkpoint(_net(seed=1), path, {})
+    save_checkpoint(_net(seed=2), path, {})
+    assert tensors_digest(load_checkpoint(path)[0]) == tensors_digest(_arrays(_net(seed=2)))
+
+
+def test_tensors_digest():
+    a = {"x": np.arange(4, dtype=np.float32), "y": np.ones((2, 2), np.float32)}
+    assert tensors_digest(a) == tensors_digest(dict(reversed(list(a.items()))))  # name order, not dict order
+    assert tensors_digest(a) == tensors_digest({k: v.copy() for k, v in a.items()})
+    assert tensors_digest(a) != tensors_digest({**a, "y": np.full((2, 2), 1.0 + 1e-7, np.float32)})
+    assert tensors_digest(a) != tensors_digest({"z": a["x"], "y": a["y"]})
+    assert tensors_digest(a) != tensors_digest({**a, "x": a["x"].astype(np.float64)})
+    nc = np.asfortranarray(np.arange(6, dtype=np.float32).reshape(2, 3))
+    assert tensors_digest({"m": nc}) == tensors_digest({"m": np.ascontiguousarray(nc)})
+    assert len(tensors_digest(a)) == 64
+
+
+# --------------------------------------------------------------------------- exploration
+
+
+def test_linear_schedule_endpoints():
+    s = make_schedule(ActorConfig(exploration="linear", epsilon_start=1.0, epsilon_final=0.1,
+                                  epsilon_decay_steps=1000), worker_index=3)
+    assert s(0) == 1.0
+    assert s(500) == pytest.approx(0.55)
+    assert s(1000) == pytest.approx(0.1)
+    assert s(10**9) == pytest.approx(0.1)
+    vals = [s(t) for t in range(0, 1200, 50)]
+    assert all(a >= b for a, b in zip(vals, vals[1:]))
+
+
+def test_exponential_schedule_has_a_floor():
+    cfg = ActorConfig(exploration="exponential", epsilon_start=1.0, epsilon_final=0.05, epsilon_decay_rate=0.01)
+    s = make_schedule(cfg, 0)
+    assert s(0) == 1.0
+    assert s(10) == pytest.approx(0.99**10)
+    assert s(100) == pytest.approx(0.99**100)
+    assert s(10_000) == 0.05 and s(10**7) == 0.05
+    assert make_schedule(ActorConfig(exploration="exponential", epsilon_decay_rate=0.0), 0)(10**6) == 1.0
+
+
+def test_apex_per_worker_epsilons():
+    """Ape-X (Horgan et al. 2018): eps_i = eps ** (1 + alpha * i / (N - 1)), eps 0.4, alpha 7."""
+    n = 8
+    cfg = ActorConfig(exploration="apex", workers=n, apex_epsilon=0.4, apex_alpha=7.0)
+    eps = [make_schedule(cfg, i)(0) for i in range(n)]
+    for i, e in enumerate(eps):
+        assert e == pytest.approx(0.4 ** (1 + 7.0 * i / (n - 1)))
+    assert eps[0] == pytest.approx(0.4) and eps[-1] == pytest.approx(0.4**8)
+    assert all(a > b for a, b in zip(eps, eps[1:]))
+    assert make_schedule(cfg, 2)(0) == make_schedule(cfg, 2)(10**6)  # fixed over time
+    single = ActorConfig(exploration="apex", workers=1, apex_epsilon=0.3)
+    assert make_schedule(single, 0)(0) == 0.3
+
+
+# --------------------------------------------------------------------------- policy
+
+
+def test_policy_greedy_at_epsilon_zero():
+    p = QPolicy((4,), 5, hidden=(8,), seed=0)
+    p.load(wire.decode_weights(to_wire(_net(hidden=(8,), obs=4, n=5, seed=4), 3, 2, 10)))
+    assert (p.version, p.phase) == (3, 2)
+    obs = np.random.default_rng(0).normal(size=(64, 4)).astype(np.float32)
+    with torch.no_grad():
+        expected = p.net(torch.as_tensor(obs)).argmax(dim=1).numpy()
+    assert np.array_equal(p.act(obs, 0.0), expected)
+    assert np.array_equal(p.greedy(obs), expected)
+
+
+def test_policy_uniform_at_epsilon_one():
+    p = QPolicy((2,), 4, hidden=(8,), seed=1)
+    _set_constant_q(p.net, [0.0, 0.0, 9.0, 0.0])  # greedy is always action 2
+    obs = np.zeros((4000, 2), np.float32)
+    actions = p.act(obs, 1.0)
+    counts = np.bincount(actions, minlength=4)
+    assert counts.sum() == 4000 and actions.min() >= 0 and actions.max() < 4
+    chi2 = float(((counts - 1000) ** 2 / 1000).sum())
+    assert chi2 < 16.27, counts  # chi-square, 3 dof, p = 0.001
+    half = np.bincount(p.act(obs, 0.5), minlength=4)
+    assert abs(half[2] / 4000 - (0.5 + 0.5 / 4)) < 0.03  # greedy share = 1 - eps + eps / n
+
+
+def test_policy_is_seeded():
+    obs = np.zeros((100, 3), np.float32)
+    a = QPolicy((3,), 6, hidden=(4,), seed=5).act(obs, 1.0)
+    b = QPolicy((3,), 6, hidden=(4,), seed=5).act(obs, 1.0)
+    c = QPolicy((3,), 6, hidden=(4,), seed=6).act(obs, 1.0)
+    assert np.array_equal(a, b) and not np.array_equal(a, c)
