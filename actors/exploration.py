@@ -19,10 +19,13 @@ from laneshift.config import ActorConfig
 Schedule = Callable[[int], float]
 
 
-def make_schedule(cfg: ActorConfig, worker_index: int) -> Schedule:
+def make_schedule(cfg: ActorConfig, worker_index: int, budget: int = 0) -> Schedule:
+    """``budget``: the worker's env-step budget, used when ``epsilon_decay_steps`` is 0 (auto)."""
     if cfg.exploration == "linear":
+        decay_steps = cfg.epsilon_decay_steps or max(1, budget // 2)
+
         def linear(step: int) -> float:
-            frac = min(step / cfg.epsilon_decay_steps, 1.0)
+            frac = min(step / decay_steps, 1.0)
             return cfg.epsilon_start + frac * (cfg.epsilon_final - cfg.epsilon_start)
         return linear
     if cfg.exploration == "exponential":

@@ -67,7 +67,6 @@ class EnvWorker:
         space = self.envs[0].observation_space
         self.policy = QPolicy(tuple(space.shape), int(self.envs[0].action_space.n), hidden,
                               seed=actor_cfg.seed + 7919 * index)
-        self.epsilon = make_schedule(actor_cfg, index)
         self.uses_policy_vehicles = env_cfg.policy_vehicles > 0
         self.bad_weights = 0
         self.weight_updates = 0
@@ -110,6 +109,7 @@ class EnvWorker:
         # Rehearsal: phase 1 learns from demos alone, so workers start with the phase-2 network.
         if not self._await_weights(links, -1, phase=2 if self.rehearsal else None):
             return self._summary(0, 0, 0, [], started)
+        epsilon = make_schedule(self.cfg, self.index, budget=env_steps)
         n_envs = len(self.envs)
         obs = np.stack([env.reset(seed=self.cfg.seed + 1000 * self.index + j)[0] for j, env in enumerate(self.envs)])
         ep_return, ep_len = np.zeros(n_envs), np.zeros(n_envs, np.int64)
@@ -121,7 +121,7 @@ class EnvWorker:
                 links.wait_insert_ok()
             rows: dict[str, list] = {k: [] for k in ("obs", "action", "reward", "next_obs", "terminated", "truncated")}
             for _ in range(iters):
-                eps = self.epsilon(steps)
+                eps = epsilon(steps)
                 actions = self.policy.act(obs, eps)
                 for j, env in enumerate(self.envs):
                     next_obs, reward, terminated, truncated, info = env.step(int(actions[j]))

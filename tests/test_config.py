@@ -216,7 +216,7 @@ BAD_VALUES = [
     ("env.max_steps", -1), ("env.initial_lane", "left"), ("env.action_set", "all"), ("env.policy_vehicles", -1),
     ("actor.workers", 0), ("actor.envs_per_worker", 0), ("actor.send_every", 0), ("actor.exploration", "boltzmann"),
     ("actor.epsilon_start", 1.5), ("actor.epsilon_start", -0.1), ("actor.epsilon_final", 2),
-    ("actor.apex_epsilon", -1), ("actor.epsilon_decay_steps", 0), ("actor.epsilon_decay_rate", 1.0),
+    ("actor.apex_epsilon", -1), ("actor.epsilon_decay_steps", -1), ("actor.epsilon_decay_rate", 1.0),
     ("actor.epsilon_decay_rate", -0.1), ("actor.torch_threads", 0),
     ("replay.capacity", 1), ("replay.demo_mode", "mixed"), ("replay.demo_ratio", 0.0), ("replay.demo_ratio", 1.0),
     ("replay.min_size", 0), ("replay.min_size", 100_001), ("replay.samples_per_insert", -1),

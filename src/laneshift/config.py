@@ -90,7 +90,7 @@ class ActorConfig:
     exploration: str = "linear"  # linear (paper) | exponential (MATLAB) | apex (per-actor fixed epsilons)
     epsilon_start: float = 1.0
     epsilon_final: float = 0.1  # paper condition 5: 1.0 -> 0.1
-    epsilon_decay_steps: int = 20_000  # linear: env steps (per worker) from start to final
+    epsilon_decay_steps: int = 0  # linear: a worker's env steps from start to final; 0 = half its budget
     epsilon_decay_rate: float = 1e-4  # exponential: eps *= (1 - rate) per step (MATLAB EpsilonDecay)
     apex_epsilon: float = 0.4  # apex: eps_i = apex_epsilon ** (1 + apex_alpha * i / (N - 1))
     apex_alpha: float = 7.0
@@ -106,7 +106,8 @@ class ActorConfig:
         for name in ("epsilon_start", "epsilon_final", "apex_epsilon"):
             v = getattr(self, name)
             _check(0.0 <= v <= 1.0, f"actor.{name}", "must be in [0, 1]", v)
-        _check(self.epsilon_decay_steps >= 1, "actor.epsilon_decay_steps", "must be >= 1", self.epsilon_decay_steps)
+        _check(self.epsilon_decay_steps >= 0, "actor.epsilon_decay_steps", "must be >= 0 (0 = half the budget)",
+               self.epsilon_decay_steps)
         _check(0.0 <= self.epsilon_decay_rate < 1.0, "actor.epsilon_decay_rate", "must be in [0, 1)",
                self.epsilon_decay_rate)
         _check(self.torch_threads >= 1, "actor.torch_threads", "must be >= 1", self.torch_threads)
