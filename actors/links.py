@@ -19,10 +19,9 @@ class ZenohActorLinks:
         self._transitions = transport.data_publisher(session, wire.transitions_key(run_id, name))
         self._episodes = transport.data_publisher(session, wire.episodes_key(run_id, name))
         self._weights = transport.LatestValue(session, wire.weights_key(run_id))
-        self._control = transport.LatestValue(session, wire.control_key(run_id))
+        self._stop = transport.StopSignal(session, wire.control_key(run_id))
         self._flow = transport.LatestValue(session, wire.replay_flow_key(run_id))
         self._insert_ok = True
-        self._stopped = False
         self._last_query = 0.0
 
     def send_transitions(self, payload: bytes) -> None:
@@ -56,15 +55,9 @@ class ZenohActorLinks:
                 pass
 
     def stop_requested(self) -> bool:
-        data = self._control.take()
-        if data is not None:
-            try:
-                self._stopped |= wire.decode_json(data).get("cmd") == "stop"
-            except wire.WireError:
-                pass
-        return self._stopped
+        return self._stop.requested()
 
     def close(self) -> None:
         self._weights.close()
-        self._control.close()
+        self._stop.close()
         self._flow.close()

@@ -44,9 +44,8 @@ class ZenohLearnerLinks:
         self._episodes: collections.deque[bytes] = collections.deque(maxlen=10_000)
         self._ep_sub = session.declare_subscriber(wire.episodes_wildcard(self.run_id),
                                                   lambda s: self._episodes.append(s.payload.to_bytes()))
-        self._control = transport.LatestValue(session, wire.control_key(self.run_id))
+        self._stop = transport.StopSignal(session, wire.control_key(self.run_id))
         self._stats_pub = session.declare_publisher(wire.learner_stats_key(self.run_id))
-        self._stopped = False
 
     def sample(self, req: wire.SampleRequest) -> wire.SampledBatch | wire.WireError | None:
         reply = transport.query_ok(self.session, wire.sample_key(self.run_id), wire.encode_sample_request(req),
@@ -78,10 +77,4 @@ class ZenohLearnerLinks:
         return out
 
     def stop_requested(self) -> bool:
-        data = self._control.take()
-        if data is not None:
-            try:
-                self._stopped |= wire.decode_json(data).get("cmd") == "stop"
-            except wire.WireError:
-                pass
-        return self._stopped
+        return self._stop.requested()

@@ -23,7 +23,7 @@ from typing import Callable
 import zenoh
 
 from .config import TransportConfig
-from .wire import Kind, WireError, decode_error, encode_error, peek_kind
+from .wire import Kind, WireError, decode_error, decode_json, encode_error, peek_kind
 
 
 def session_config(endpoint: str, mode: str) -> zenoh.Config:
@@ -92,6 +92,26 @@ class LatestValue:
 
     def close(self) -> None:
         self._sub.undeclare()
+
+
+class StopSignal:
+    """The run-wide control key as a sticky flag: True once ``{"cmd": "stop"}`` arrived."""
+
+    def __init__(self, session: zenoh.Session, key: str):
+        self._latest = LatestValue(session, key)
+        self._stopped = False
+
+    def requested(self) -> bool:
+        data = self._latest.take()
+        if data is not None:
+            try:
+                self._stopped |= decode_json(data).get("cmd") == "stop"
+            except WireError:
+                pass  # a malformed control message is ignored, never fatal
+        return self._stopped
+
+    def close(self) -> None:
+        self._latest.close()
 
 
 def serve_queries(session: zenoh.Session, key: str, handler: Callable[[bytes], bytes], stop: threading.Event,
