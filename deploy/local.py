@@ -143,6 +143,10 @@ def train_local(cfg: RunConfig, out: TextIO = sys.stdout, ray_address: str | Non
     rc = 1
     started = time.monotonic()
     try:
+        stale = run_dir / "replay_checkpoint"
+        if stale.exists():  # a new run starts empty; restore is for a replay server restarted mid-run
+            print(f"train: removing the previous run's replay checkpoint {stale}", file=out, flush=True)
+            shutil.rmtree(stale)
         cfg = ensure_demo_shard(cfg, out)
         config_path = save_run_config(cfg, run_dir / "config.yaml")
         py = [sys.executable, "-m", "laneshift"]

@@ -82,6 +82,7 @@ class ReplayCore:
         self.requests = collections.Counter()
         self._recent = collections.deque(maxlen=200)  # (rows, demo rows) of recent requests
         self._rates = _RateMeter()
+        self.last_checkpoint: dict = {}  # set by the service's checkpointer
 
     # ------------------------------------------------------------------ ingest
 
@@ -181,9 +182,7 @@ class ReplayCore:
             out[name][o] = getattr(self.online, name)[online_rows]
         index = np.empty(n, np.int64)
         index[d] = demo_rows
-        # Online keys: the newest insertion counter that maps to each ring row.
-        last = self.online.inserted - 1
-        index[o] = last - ((last - online_rows) % self.online.capacity)
+        index[o] = self.online.key[online_rows]
         return SampledBatch(is_demo=is_demo.astype(np.uint8), index=index, weight=np.ones(n, np.float32),
                             num_batches=nb, info={"phase": self.phase}, **out)
 
@@ -254,6 +253,9 @@ class ReplayCore:
                 "dropped": dict(self.dropped),
                 "actors": {k: dict(v) for k, v in self.actors.items()},
                 "rates": self._rates.rates(),
+                "checkpoint": {**self.last_checkpoint,
+                               "age_s": round(time.monotonic() - self.last_checkpoint["monotonic"], 1)}
+                if self.last_checkpoint else None,
                 "rate_limiter": self.limiter.state(size=online_size, inserts=self.online.inserted,
                                                    samples=self.samples),
             }

@@ -22,6 +22,7 @@ import zenoh
 from laneshift import transport, wire
 from laneshift.config import RunConfig
 
+from .checkpoint import CheckpointError, restore_checkpoint, write_checkpoint
 from .core import ReplayCore
 from .demo_loading import load_demo_table
 
@@ -29,18 +30,25 @@ from .demo_loading import load_demo_table
 class ReplayService:
     """Wires a ReplayCore to a zenoh session. ``start()`` returns at once; ``stop()`` joins."""
 
-    def __init__(self, core: ReplayCore, session: zenoh.Session, run_id: str):
+    def __init__(self, core: ReplayCore, session: zenoh.Session, run_id: str,
+                 checkpoint_dir: Path | None = None, checkpoint_every_s: float = 0.0):
         self.core = core
         self.session = session
         self.run_id = run_id
+        self.checkpoint_dir, self.checkpoint_every_s = checkpoint_dir, checkpoint_every_s
         self.stop_event = threading.Event()
         self._threads: list[threading.Thread] = []
+        self._checkpoint_lock = threading.Lock()  # one checkpoint at a time (periodic vs final)
 
     def start(self) -> "ReplayService":
         sub = self.session.declare_subscriber(wire.transitions_wildcard(self.run_id), zenoh.handlers.FifoChannel(1024))
         ingest = threading.Thread(target=self._ingest_loop, args=(sub,), name="replay-ingest", daemon=True)
         ingest.start()
         self._threads.append(ingest)
+        if self.checkpoint_dir is not None and self.checkpoint_every_s > 0:
+            ckpt = threading.Thread(target=self._checkpoint_loop, name="replay-checkpoint", daemon=True)
+            ckpt.start()
+            self._threads.append(ckpt)
         flow = threading.Thread(target=self._flow_loop, name="replay-flow", daemon=True)
         flow.start()
         self._threads.append(flow)
@@ -80,6 +88,23 @@ class ReplayService:
                 pub.put(wire.encode_json({"insert_ok": ok}))
                 last, last_sent = ok, now
 
+    def _checkpoint_loop(self) -> None:
+        while not self.stop_event.wait(self.checkpoint_every_s):
+            self.checkpoint()
+
+    def checkpoint(self) -> dict | None:
+        """Write a checkpoint now (inserts and samples continue meanwhile)."""
+        if self.checkpoint_dir is None:
+            return None
+        with self._checkpoint_lock:
+            try:
+                info = write_checkpoint(self.core, self.checkpoint_dir)
+            except OSError as exc:  # a full disk must not take the server down: report and go on
+                print(f"replay-server: checkpoint failed: {exc}", file=sys.stderr, flush=True)
+                return None
+        self.core.last_checkpoint = {**info, "monotonic": time.monotonic()}
+        return info
+
     def _control(self, payload: bytes) -> bytes:
         try:
             body = wire.decode_json(payload)
@@ -111,9 +136,18 @@ def run_replay_server(cfg: RunConfig, *, embedded_router: bool = False, ready_fi
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
+    checkpoint_dir = Path(cfg.train.run_dir) / "replay_checkpoint"
+    if cfg.replay.restore and (checkpoint_dir / "meta.json").exists():
+        try:
+            restored = restore_checkpoint(core, checkpoint_dir)
+        except CheckpointError as exc:
+            print(f"replay-server: {exc}; remove it or start with replay.restore=false", file=sys.stderr)
+            return 2
+        print(f"replay-server: restored {restored} items from {checkpoint_dir}", flush=True)
     mode = "router" if embedded_router else "client"
     with transport.open_session(cfg.transport, mode=mode) as session:
-        service = ReplayService(core, session, cfg.transport.run_id).start()
+        service = ReplayService(core, session, cfg.transport.run_id, checkpoint_dir,
+                                cfg.replay.checkpoint_every_s).start()
         stats = core.stats()
         print(f"replay-server: serving run {cfg.transport.run_id!r} on {cfg.transport.router} "
               f"(mode {core.mode}, online capacity {core.online.capacity}, demo items {core.demo.size}, "
@@ -123,6 +157,10 @@ def run_replay_server(cfg: RunConfig, *, embedded_router: bool = False, ready_fi
         while not stop.wait(0.5):
             pass
         service.stop()
+        final_ckpt = service.checkpoint()  # SIGTERM/SIGINT: keep everything received
+        if final_ckpt:
+            print(f"replay-server: final checkpoint of {final_ckpt['items']} items in {final_ckpt['seconds']} s",
+                  flush=True)
     final = core.stats()
     final["demo_digest_start"], final["demo_digest_end"] = demo_digest, core.demo.digest()
     out = Path(cfg.train.run_dir) / "replay_stats.json"

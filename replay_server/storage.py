@@ -30,6 +30,7 @@ class RingTable:
         self.truncated = np.zeros(self.capacity, np.uint8)
         self.actor = np.zeros(self.capacity, np.int16)  # index into the server's actor list
         self.version = np.zeros(self.capacity, np.int64)  # weights version that acted
+        self.key = np.full(self.capacity, -1, np.int64)  # each row's item key (-1: empty)
         self.inserted = 0  # total items ever inserted (the next item's key)
 
     @property
@@ -39,7 +40,7 @@ class RingTable:
     @property
     def nbytes(self) -> int:
         return sum(a.nbytes for a in (self.obs, self.next_obs, self.action, self.reward, self.terminated,
-                                      self.truncated, self.actor, self.version))
+                                      self.truncated, self.actor, self.version, self.key))
 
     def insert(self, batch: TransitionBatch, actor_index: int) -> np.ndarray:
         """Store a validated batch; returns the keys of the items stored."""
@@ -55,6 +56,7 @@ class RingTable:
         self.truncated[rows] = batch.truncated[skip:]
         self.actor[rows] = actor_index
         self.version[rows] = batch.weights_version
+        self.key[rows] = keys
         self.inserted += n
         return keys
 

@@ -130,9 +130,14 @@ class ReplayConfig:
     # 256, 32 means one update per 8 env steps; actors wait when the learner falls behind.
     samples_per_insert: float = 32.0
     spi_tolerance: float = 8192.0  # rows of slack either side of the ratio (>= one sample request)
+    # Online-table checkpoints in <run dir>/replay_checkpoint, written without blocking inserts or
+    # samples; kill -9 loses at most about one interval of agent experience. 0 = only at shutdown.
+    checkpoint_every_s: float = 60.0
+    restore: bool = True  # restore the online table from the run dir's checkpoint at start
     seed: int = 0
 
     def __post_init__(self) -> None:
+        _check(self.checkpoint_every_s >= 0, "replay.checkpoint_every_s", "must be >= 0", self.checkpoint_every_s)
         _check(self.capacity >= 2, "replay.capacity", "must be >= 2", self.capacity)
         _check(self.demo_mode in ("none", "retention", "rehearsal"), "replay.demo_mode",
                "must be none, retention or rehearsal", self.demo_mode)

@@ -1,0 +1,112 @@
+"""Checkpoints of the online table that never stop inserts or samples for long.
+
+A checkpoint copies the ring in chunks; each chunk is copied under the core's lock (about a
+millisecond), and the lock is released between chunks, so actors and the learner keep going
+while it runs. Every row carries its item's key (insertion counter), so the snapshot is a set of
+complete items even when inserts overwrite rows mid-checkpoint: a row copied after being
+overwritten simply holds the newer item. The files go to a temp directory that is renamed over
+the previous checkpoint at the end, so a crash (even kill -9) leaves either the old or the new
+checkpoint, never a torn one. After a kill -9, what is lost is at most what arrived since the
+last checkpoint started (``replay.checkpoint_every_s`` plus the copy time).
+
+The demo table is not checkpointed: it is reloaded from its shard, whose sha256 is verified.
+
+Layout of ``<run dir>/replay_checkpoint/``: one ``.npy`` per column (``obs``, ``next_obs``,
+``action``, ``reward``, ``terminated``, ``truncated``, ``actor``, ``version``, ``key``) and
+``meta.json`` (format version, schema, counters, per-actor stats).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .core import ReplayCore
+
+FORMAT = 1
+COLUMNS = ("obs", "next_obs", "action", "reward", "terminated", "truncated", "actor", "version", "key")
+CHUNK_BYTES = 4 * 2**20  # rows copied per lock hold: ~4 MiB
+
+
+class CheckpointError(ValueError):
+    pass
+
+
+def write_checkpoint(core: "ReplayCore", directory: str | Path) -> dict:
+    """Snapshot ``core``'s online table into ``directory`` (atomically replaced)."""
+    directory = Path(directory)
+    tmp = directory.with_name(directory.name + ".tmp")
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    table = core.online
+    started = time.monotonic()
+    cols = {name: np.lib.format.open_memmap(tmp / f"{name}.npy", mode="w+", dtype=getattr(table, name).dtype,
+                                            shape=getattr(table, name).shape) for name in COLUMNS}
+    row_bytes = sum(c.dtype.itemsize * int(np.prod(c.shape[1:], dtype=np.int64)) for c in cols.values())
+    chunk = max(1, CHUNK_BYTES // max(row_bytes, 1))
+    for begin in range(0, table.capacity, chunk):
+        end = min(begin + chunk, table.capacity)
+        with core._lock:  # short: one chunk, then inserts and samples go on
+            for name, col in cols.items():
+                col[begin:end] = getattr(table, name)[begin:end]
+    with core._lock:
+        meta = {"format": FORMAT, "obs_shape": list(core.schema.obs_shape), "obs_dtype": core.schema.obs_dtype,
+                "n_actions": core.schema.n_actions, "capacity": table.capacity, "inserted": table.inserted,
+                "actors": {k: dict(v) for k, v in core.actors.items()}, "actor_index": dict(core._actor_index),
+                "phase": core.phase, "mode": core.mode, "time": time.time()}
+    for col in cols.values():
+        col.flush()
+    del cols
+    items = int((np.load(tmp / "key.npy", mmap_mode="r") >= 0).sum())
+    meta["items"] = items
+    (tmp / "meta.json").write_text(json.dumps(meta))
+    old = directory.with_name(directory.name + ".old")
+    shutil.rmtree(old, ignore_errors=True)
+    if directory.exists():
+        directory.rename(old)
+    tmp.rename(directory)
+    shutil.rmtree(old, ignore_errors=True)
+    return {"items": items, "seconds": round(time.monotonic() - started, 3), "path": str(directory)}
+
+
+def restore_checkpoint(core: "ReplayCore", directory: str | Path) -> int:
+    """Put a checkpoint's items back into a fresh core (in key order). Returns items restored."""
+    directory = Path(directory)
+    try:
+        meta = json.loads((directory / "meta.json").read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise CheckpointError(f"replay checkpoint {directory}: unreadable meta.json ({exc})") from None
+    if meta.get("format") != FORMAT:
+        raise CheckpointError(f"replay checkpoint {directory}: format {meta.get('format')} != {FORMAT}")
+    if (tuple(meta["obs_shape"]) != core.schema.obs_shape or meta["obs_dtype"] != core.schema.obs_dtype
+            or meta["n_actions"] != core.schema.n_actions):
+        raise CheckpointError(f"replay checkpoint {directory}: observation {meta['obs_shape']} {meta['obs_dtype']} / "
+                              f"{meta['n_actions']} actions does not match the run's env")
+    try:
+        cols = {name: np.load(directory / f"{name}.npy", mmap_mode="r") for name in COLUMNS}
+    except (OSError, ValueError) as exc:
+        raise CheckpointError(f"replay checkpoint {directory}: {exc}") from None
+    keys = np.asarray(cols["key"])
+    order = np.argsort(keys, kind="stable")
+    order = order[keys[order] >= 0]
+    table = core.online
+    order = order[-table.capacity:]  # a smaller table keeps the newest items
+    with core._lock:
+        # The items go back oldest first into rows 0..n-1 with keys renumbered 0..n-1: no holes and
+        # no collisions whatever the old capacity was (keys only identify items for priority updates).
+        n = len(order)
+        for name in COLUMNS[:-1]:
+            getattr(table, name)[:n] = np.asarray(cols[name][order])
+        table.key[:n] = np.arange(n)
+        table.inserted = n
+        core.actors.update({k: dict(v) for k, v in meta.get("actors", {}).items()})
+        core._actor_index.update({k: int(v) for k, v in meta.get("actor_index", {}).items()})
+        if core.mode == "rehearsal" and meta.get("mode") == "rehearsal":
+            core.phase = max(core.phase, int(meta.get("phase", core.phase)))
+    return n
