@@ -89,6 +89,9 @@ class InProcessLearnerLinks:
             self.board.weights = payload
             self.board.cond.notify_all()
 
+    def send_priorities(self, payload: bytes) -> None:
+        self.board.core.handle_priorities(payload)
+
     def publish_stats(self, payload: bytes) -> None:
         self.board.learner_stats = wire.decode_json(payload)
 

@@ -65,8 +65,10 @@ class DoubleDQN:
         self.updates += 1
         if self.updates % self.cfg.target_update_period == 0:
             self.target.load_state_dict(self.online.state_dict())
+        # Per-item |TD error|: the new priorities when the replay samples by priority.
+        self.last_td_abs = td_error.detach().abs().numpy()
         return {"loss": float(loss.detach()), "q_mean": float(q.detach().mean()), "grad_norm": float(grad_norm),
-                "td_abs": float(td_error.detach().abs().mean())}
+                "td_abs": float(self.last_td_abs.mean())}
 
     @torch.no_grad()
     def greedy(self, obs: np.ndarray) -> np.ndarray:

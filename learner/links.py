@@ -2,7 +2,7 @@
 
 - ``sample(SampleRequest)`` -> SampledBatch, a WireError (not ready / rate limited) or None;
 - ``replay_stats()`` / ``replay_control(body)``: the replay server's stats and commands;
-- ``publish_weights(bytes)`` / ``publish_stats(bytes)``; ``take_episodes()``; ``stop_requested()``.
+- ``publish_weights(bytes)`` / ``publish_stats(bytes)`` / ``send_priorities(bytes)``; ``take_episodes()``; ``stop_requested()``.
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ class LearnerLinks(Protocol):
     def replay_stats(self) -> dict | None: ...
     def replay_control(self, body: dict) -> dict | None: ...
     def publish_weights(self, payload: bytes) -> None: ...
+    def send_priorities(self, payload: bytes) -> None: ...
     def publish_stats(self, payload: bytes) -> None: ...
     def take_episodes(self) -> list[bytes]: ...
     def stop_requested(self) -> bool: ...
@@ -46,6 +47,7 @@ class ZenohLearnerLinks:
                                                   lambda s: self._episodes.append(s.payload.to_bytes()))
         self._stop = transport.StopSignal(session, wire.control_key(self.run_id))
         self._stats_pub = session.declare_publisher(wire.learner_stats_key(self.run_id))
+        self._priorities = transport.data_publisher(session, wire.priorities_key(self.run_id))
 
     def sample(self, req: wire.SampleRequest) -> wire.SampledBatch | wire.WireError | None:
         reply = transport.query_ok(self.session, wire.sample_key(self.run_id), wire.encode_sample_request(req),
@@ -66,6 +68,9 @@ class ZenohLearnerLinks:
     def publish_weights(self, payload: bytes) -> None:
         self._latest = payload
         self._pub.put(payload)
+
+    def send_priorities(self, payload: bytes) -> None:
+        self._priorities.put(payload)
 
     def publish_stats(self, payload: bytes) -> None:
         self._stats_pub.put(payload)

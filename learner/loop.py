@@ -104,11 +104,16 @@ class Learner:
         return self.stop.is_set()
 
     def _updates(self, batch: wire.SampledBatch) -> None:
+        td_abs = []
         for part in _split(batch):
             metrics = self.agent.update(part)
+            td_abs.append(self.agent.last_td_abs)
             self.last_update = metrics
             if self.agent.updates % self.lcfg.checkpoint_every == 0:
                 self.checkpoint("latest")
+        if batch.info.get("prioritized"):
+            self.links.send_priorities(wire.encode_priorities(wire.PriorityUpdate(
+                index=batch.index, is_demo=batch.is_demo, priority=np.concatenate(td_abs).astype(np.float32))))
 
     def _fetch(self, req: wire.SampleRequest) -> wire.SampledBatch | None:
         """One sample request; on 'not ready' or no answer waits a little and returns None."""

@@ -30,10 +30,12 @@ from typing import Any
 import numpy as np
 
 from laneshift.config import ReplayConfig
-from laneshift.wire import (SampledBatch, SampleRequest, TransitionSchema, WireError, decode_sample_request,
-                            decode_transitions, encode_batch, encode_error)
+from laneshift.wire import (PriorityUpdate, SampledBatch, SampleRequest, TransitionSchema, WireError,
+                            decode_priorities, decode_sample_request, decode_transitions, encode_batch,
+                            encode_error)
 
 from .rate_limiter import SampleToInsertRatio
+from .sum_tree import SumTree
 from .storage import DemoTable, RingTable
 
 MAX_ACTORS = 4096
@@ -83,6 +85,17 @@ class ReplayCore:
         self._recent = collections.deque(maxlen=200)  # (rows, demo rows) of recent requests
         self._rates = _RateMeter()
         self.last_checkpoint: dict = {}  # set by the service's checkpointer
+        # Prioritized sampling: one sum tree over [demo rows | online rows]. Which leaves carry mass
+        # is the demo mode: demo leaves are zero in `none` and in rehearsal phase 2.
+        self.prioritized = cfg.sampler == "prioritized"
+        self._max_priority = 1.0
+        self.tree: SumTree | None = None
+        if self.prioritized:
+            self.tree = SumTree(self.demo.size + self.online.capacity)
+            if self.demo.size:
+                start = (1.0 + cfg.demo_priority_bonus) ** cfg.priority_alpha
+                self.tree.set(np.arange(self.demo.size), np.full(self.demo.size, start))
+        self.priority_updates = 0
 
     # ------------------------------------------------------------------ ingest
 
@@ -120,7 +133,10 @@ class ReplayCore:
                 # Paper: in phase 1 the agent's own transitions are not stored.
                 self.dropped["rehearsal_phase1"] += len(batch)
                 return None
-            self.online.insert(batch, self._actor_index[batch.actor])
+            keys = self.online.insert(batch, self._actor_index[batch.actor])
+            if self.tree is not None:  # new items get the highest priority seen: sampled at least once soon
+                self.tree.set(self.demo.size + self.online.rows_of(keys),
+                              np.full(len(keys), self._max_priority ** self.cfg.priority_alpha))
             stats["stored"] += len(batch)
             self._rates.add("inserts", len(batch))
         return None
@@ -155,11 +171,20 @@ class ReplayCore:
                     return _retry("rate_limited", f"online size {self.online.size}, min {self.limiter.min_size}", 5)
                 n_demo = self.demo.size if self.mode == "retention" else 0
                 n_online = self.online.size
-            pick = self._rng.integers(0, n_demo + n_online, size=rows)
-            is_demo = pick < n_demo
-            demo_rows = pick[is_demo]
-            online_rows = pick[~is_demo] - n_demo
-            batch = self._gather(is_demo, demo_rows, online_rows, req.num_batches)
+            if self.tree is not None:
+                leaves = self.tree.sample(self._rng, rows)
+                is_demo = leaves < self.demo.size
+                demo_rows, online_rows = leaves[is_demo], leaves[~is_demo] - self.demo.size
+                # Importance weights (N P(i))^-beta, normalised by the batch maximum.
+                prob = self.tree.get(leaves) / self.tree.total
+                weight = (float(n_demo + n_online) * prob) ** -self.cfg.priority_beta
+                weight = (weight / weight.max()).astype(np.float32)
+            else:
+                pick = self._rng.integers(0, n_demo + n_online, size=rows)
+                is_demo = pick < n_demo
+                demo_rows, online_rows = pick[is_demo], pick[~is_demo] - n_demo
+                weight = np.ones(rows, np.float32)
+            batch = self._gather(is_demo, demo_rows, online_rows, req.num_batches, weight)
             if not demo_only:
                 self.samples += rows
             self.sampled_rows += rows
@@ -169,7 +194,8 @@ class ReplayCore:
             self._rates.add("samples", rows)
         return batch
 
-    def _gather(self, is_demo: np.ndarray, demo_rows: np.ndarray, online_rows: np.ndarray, nb: int) -> SampledBatch:
+    def _gather(self, is_demo: np.ndarray, demo_rows: np.ndarray, online_rows: np.ndarray, nb: int,
+                weight: np.ndarray) -> SampledBatch:
         n = is_demo.shape[0]
         out = {
             "obs": np.empty((n, *self.schema.obs_shape), self.schema.obs_dtype),
@@ -183,8 +209,43 @@ class ReplayCore:
         index = np.empty(n, np.int64)
         index[d] = demo_rows
         index[o] = self.online.key[online_rows]
-        return SampledBatch(is_demo=is_demo.astype(np.uint8), index=index, weight=np.ones(n, np.float32),
-                            num_batches=nb, info={"phase": self.phase}, **out)
+        return SampledBatch(is_demo=is_demo.astype(np.uint8), index=index, weight=weight, num_batches=nb,
+                            info={"phase": self.phase, "prioritized": self.prioritized}, **out)
+
+    def update_priorities(self, update: PriorityUpdate) -> int:
+        """New priorities for sampled items (e.g. |TD error|); items evicted since are skipped.
+
+        Returns how many leaves changed. Demo items get ``demo_priority_bonus`` on top (DQfD).
+        """
+        if self.tree is None:
+            return 0
+        cfg = self.cfg
+        with self._lock:
+            raw = update.priority.astype(np.float64) + cfg.priority_eps
+            demo = update.is_demo.astype(bool)
+            raw[demo] += cfg.demo_priority_bonus
+            # Demo leaves are live only where the mode samples demos (retention, rehearsal phase 1).
+            demo_live = self.mode == "retention" or self.phase == 1
+            ok_demo = demo & (update.index < self.demo.size) & demo_live
+            rows = update.index % self.online.capacity
+            ok_online = ~demo & (self.online.key[rows] == update.index)  # not overwritten since sampled
+            leaves = np.concatenate([update.index[ok_demo], self.demo.size + rows[ok_online]])
+            values = np.concatenate([raw[ok_demo], raw[ok_online]])
+            if len(leaves):
+                self._max_priority = max(self._max_priority, float(values.max()))
+                self.tree.set(leaves, values ** cfg.priority_alpha)
+            self.priority_updates += 1
+            return len(leaves)
+
+    def handle_priorities(self, payload: bytes | bytearray | memoryview) -> str | None:
+        """Bytes in: apply a PRIORITIES message, or count why it was refused (never raises)."""
+        try:
+            self.update_priorities(decode_priorities(payload))
+        except WireError as exc:
+            return self._reject("priorities:" + exc.reason)
+        except Exception:  # noqa: BLE001
+            return self._reject("priorities:failed")
+        return None
 
     def handle_sample_query(self, payload: bytes | bytearray | memoryview) -> bytes:
         """Bytes in, bytes out: what the zenoh queryable replies."""
@@ -206,6 +267,8 @@ class ReplayCore:
         with self._lock:
             if phase < self.phase:
                 raise ValueError("rehearsal phases only move forward")
+            if phase == 2 and self.tree is not None and self.demo.size:
+                self.tree.set(np.arange(self.demo.size), np.zeros(self.demo.size))  # ordinary replay now
             self.phase = phase
 
     def insert_allowed(self) -> bool:
@@ -249,6 +312,8 @@ class ReplayCore:
                 "sampled_rows": self.sampled_rows,
                 "sampled_demo_rows": self.sampled_demo_rows,
                 "requests": dict(self.requests),
+                "sampler": {"kind": self.cfg.sampler, "priority_updates": self.priority_updates,
+                            "max_priority": self._max_priority if self.prioritized else None},
                 "rejected": dict(self.rejected),
                 "dropped": dict(self.dropped),
                 "actors": {k: dict(v) for k, v in self.actors.items()},

@@ -45,6 +45,10 @@ class ReplayService:
         ingest = threading.Thread(target=self._ingest_loop, args=(sub,), name="replay-ingest", daemon=True)
         ingest.start()
         self._threads.append(ingest)
+        prio_sub = self.session.declare_subscriber(wire.priorities_key(self.run_id), zenoh.handlers.FifoChannel(256))
+        prio = threading.Thread(target=self._priorities_loop, args=(prio_sub,), name="replay-priorities", daemon=True)
+        prio.start()
+        self._threads.append(prio)
         if self.checkpoint_dir is not None and self.checkpoint_every_s > 0:
             ckpt = threading.Thread(target=self._checkpoint_loop, name="replay-checkpoint", daemon=True)
             ckpt.start()
@@ -76,6 +80,14 @@ class ReplayService:
                 self.core.ingest(sample.payload.to_bytes(), actor)
             except Exception:  # noqa: BLE001 - a bug must cost one message, never the ingest thread
                 self.core._reject("internal_error")
+
+    def _priorities_loop(self, sub: zenoh.Subscriber) -> None:
+        while not self.stop_event.is_set():
+            try:
+                sample = sub.recv()
+            except Exception:  # noqa: BLE001 - channel closed with the session
+                return
+            self.core.handle_priorities(sample.payload.to_bytes())  # never raises; refusals are counted
 
     def _flow_loop(self, period_s: float = 0.01, heartbeat_s: float = 0.25) -> None:
         """Tell actors whether they may insert: on every change, and as a heartbeat."""

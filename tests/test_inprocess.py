@@ -29,3 +29,15 @@ def test_sync_inprocess_rounds(tmp_path):
     result = train_inprocess(cfg)
     used = [w["versions_used"] for w in result["workers"]]
     assert used[0] == used[1] == list(range(10))
+
+
+def test_prioritized_replay_gets_priorities_from_the_learner(tmp_path):
+    cfg = load_run_config(overrides={**FAST, "train.env_steps": 1500, "replay.sampler": "prioritized",
+                                     "train.run_dir": str(tmp_path)})
+    result = train_inprocess(cfg)
+    sampler = result["replay"]["sampler"]
+    assert sampler["kind"] == "prioritized"
+    # One priority message per sample reply, each applied (none refused).
+    assert sampler["priority_updates"] == result["replay"]["requests"]["served"] > 0
+    assert result["replay"]["rejected"] == {}
+    assert sampler["max_priority"] > 0

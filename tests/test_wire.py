@@ -139,7 +139,7 @@ def test_constants_and_kind_numbers_are_the_documented_ones():
     assert (MAGIC, WIRE_VERSION) == (b"LSHF", 1)
     assert (MAX_HEADER_BYTES, MAX_MESSAGE_BYTES, MAX_BATCH_ROWS) == (65536, 256 * 2**20, 65536)
     assert {k.name: int(k) for k in Kind} == {"TRANSITIONS": 1, "WEIGHTS": 2, "SAMPLE_REQUEST": 3, "BATCH": 4,
-                                              "ERROR": 5, "JSON": 6}
+                                              "ERROR": 5, "JSON": 6, "PRIORITIES": 7}
     assert wire.ALLOWED_DTYPES == {"|u1", "|b1", "|i1", "<i2", "<u2", "<i4", "<u4", "<i8", "<f2", "<f4", "<f8"}
 
 
@@ -330,7 +330,7 @@ def test_wrong_version():
 
 def test_unknown_kind_and_wrong_kind():
     assert reason_of(decode, envelope(0, {"arrays": []})) == "bad_kind"
-    assert reason_of(decode, envelope(7, {"arrays": []})) == "bad_kind"
+    assert reason_of(decode, envelope(8, {"arrays": []})) == "bad_kind"
     assert reason_of(decode_transitions, encode_json({}), SCHEMA) == "wrong_kind"
     assert reason_of(decode_weights, encode_json({})) == "wrong_kind"
     assert reason_of(decode_sample_request, encode_json({})) == "wrong_kind"

@@ -130,6 +130,11 @@ class ReplayConfig:
     # 256, 32 means one update per 8 env steps; actors wait when the learner falls behind.
     samples_per_insert: float = 32.0
     spi_tolerance: float = 8192.0  # rows of slack either side of the ratio (>= one sample request)
+    sampler: str = "uniform"  # uniform | prioritized (sum tree, Schaul et al. 2016)
+    priority_alpha: float = 0.6  # P(i) ~ p_i ** alpha
+    priority_beta: float = 0.4  # importance-sampling exponent (1 = full correction)
+    priority_eps: float = 1e-3  # added to |TD error| so no item starves
+    demo_priority_bonus: float = 1.0  # DQfD's epsilon_d: extra priority for demo items
     # Online-table checkpoints in <run dir>/replay_checkpoint, written without blocking inserts or
     # samples; kill -9 loses at most about one interval of agent experience. 0 = only at shutdown.
     checkpoint_every_s: float = 60.0
@@ -137,6 +142,12 @@ class ReplayConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
+        _check(self.sampler in ("uniform", "prioritized"), "replay.sampler", "must be uniform or prioritized",
+               self.sampler)
+        for name in ("priority_alpha", "priority_beta"):
+            _check(0.0 <= getattr(self, name) <= 1.0, f"replay.{name}", "must be in [0, 1]", getattr(self, name))
+        _check(self.priority_eps > 0, "replay.priority_eps", "must be > 0", self.priority_eps)
+        _check(self.demo_priority_bonus >= 0, "replay.demo_priority_bonus", "must be >= 0", self.demo_priority_bonus)
         _check(self.checkpoint_every_s >= 0, "replay.checkpoint_every_s", "must be >= 0", self.checkpoint_every_s)
         _check(self.capacity >= 2, "replay.capacity", "must be >= 2", self.capacity)
         _check(self.demo_mode in ("none", "retention", "rehearsal"), "replay.demo_mode",

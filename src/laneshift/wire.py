@@ -63,6 +63,7 @@ class Kind(enum.IntEnum):
     BATCH = 4  # replay server -> learner (query reply)
     ERROR = 5  # any reply that could not be served
     JSON = 6  # stats, episode statistics, control commands: header only
+    PRIORITIES = 7  # learner -> replay server: new priorities of sampled items
 
 
 class WireError(ValueError):
@@ -117,6 +118,11 @@ def replay_stats_key(run: str) -> str:
 
 def replay_control_key(run: str) -> str:
     return f"laneshift/{_check_name('run', run)}/replay/control"
+
+
+def priorities_key(run: str) -> str:
+    """Learner -> replay server: PRIORITIES messages (prioritized sampling)."""
+    return f"laneshift/{_check_name('run', run)}/replay/priorities"
 
 
 def replay_flow_key(run: str) -> str:
@@ -527,6 +533,40 @@ def decode_batch(data: bytes | bytearray | memoryview, schema: TransitionSchema)
     if nb < 1 or rows % nb:
         raise WireError("bad_header", f"{rows} rows do not split into {nb} batches")
     return SampledBatch(num_batches=nb, info=msg.header.get("info", {}), **msg.arrays)
+
+
+# --------------------------------------------------------------------------- priorities
+
+
+@dataclass(frozen=True)
+class PriorityUpdate:
+    index: np.ndarray  # int64 item keys as sampled (SampledBatch.index)
+    is_demo: np.ndarray  # uint8, as sampled
+    priority: np.ndarray  # float32 >= 0, e.g. |TD error|
+
+
+def encode_priorities(update: PriorityUpdate) -> bytes:
+    return encode(Kind.PRIORITIES, {}, {"index": np.asarray(update.index, np.int64),
+                                        "is_demo": np.asarray(update.is_demo, np.uint8),
+                                        "priority": np.asarray(update.priority, np.float32)})
+
+
+def decode_priorities(data: bytes | bytearray | memoryview) -> PriorityUpdate:
+    msg = decode(data, expect=Kind.PRIORITIES)
+    a = msg.arrays
+    if set(a) != {"index", "is_demo", "priority"}:
+        raise WireError("bad_arrays", f"priorities arrays {sorted(a)}")
+    rows = a["index"].shape[0] if a["index"].ndim == 1 else -1
+    if not 1 <= rows <= MAX_BATCH_ROWS:
+        raise WireError("bad_shape", f"index must be 1-D with 1..{MAX_BATCH_ROWS} rows")
+    for name, code in (("index", "<i8"), ("is_demo", "|u1"), ("priority", "<f4")):
+        if a[name].shape != (rows,) or a[name].dtype.str != code:
+            raise WireError("bad_shape", f"{name} must be {code} of shape ({rows},)")
+    if a["is_demo"].max() > 1 or a["index"].min() < 0:
+        raise WireError("bad_value", "is_demo must be 0/1 and index >= 0")
+    if not np.isfinite(a["priority"]).all() or (a["priority"] < 0).any():
+        raise WireError("non_finite", "priorities must be finite and >= 0")
+    return PriorityUpdate(**a)
 
 
 # --------------------------------------------------------------------------- JSON messages and errors

@@ -1,0 +1,624 @@
+"""`laneshift bench replay`: replay-server ingest and sample speed over zenoh on loopback.
+
+What runs is the topology `laneshift train --local` gives users: a `laneshift router` process and
+a `laneshift replay-server` process as its client (straight scenario, vector or grayscale
+observations, ``replay.samples_per_insert 0`` so the rate limiter never throttles, ``min_size 1``).
+Synthetic actors are separate OS processes (this module's ``_publish`` entry point), each a zenoh
+client publishing pre-encoded TRANSITIONS messages (``wire.encode_transitions``, valid per-actor
+``seq``) with ``CongestionControl.BLOCK`` as fast as it can, several actor keys per process.
+
+Measured:
+
+- ingest transitions/s = what the server *stored* over a window after a warm-up
+  (``replay/stats``: ``tables.online.inserted`` against the server's own ``uptime_s``), not what
+  publishers claim to have sent; lost (per-actor ``seq`` gaps), rejected and never-stored items
+  are reported next to it;
+- sample latency: ``replay/sample`` queries with ``SampleRequest(256)`` from this process, timed
+  from the query to the decoded batch (``wire.decode_batch``), on an idle server and while two
+  actors insert;
+- bytes per stored transition: the online table's ``bytes`` / ``capacity``;
+- ingest with 2 .. 64 actors (fixed number of publisher processes, actor keys multiplexed);
+- CPU used by each process over every window (from /proc), so a slow number can be attributed.
+
+    laneshift bench replay                      # text
+    laneshift bench replay --duration 5 --json  # one JSON object
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import signal
+import socket
+import struct
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any, TextIO
+
+import numpy as np
+
+from laneshift import transport, wire
+from laneshift.config import TransportConfig
+
+TARGET_INGEST_VECTOR_PER_S = 200_000
+TARGET_SAMPLE_P99_MS = 5.0
+SAMPLE_BATCH = 256
+FILL_TIMEOUT_S = 300
+# Placeholders written by wire.encode_transitions, then overwritten in place with the real values
+# padded by spaces to the same width (JSON allows whitespace after a number), so each message costs
+# one join instead of a full encode. 16 digits, below the wire's 2**53 bound for header integers.
+_SEQ_MARK = 1_111_111_111_111_111
+_STEPS_MARK = 2_222_222_222_222_222
+_MARK_WIDTH = 16
+
+
+class BenchError(RuntimeError):
+    pass
+
+
+# ----------------------------------------------------------------------------- CLI
+
+
+def register(subparsers: Any) -> None:
+    """Add the ``replay`` sub-command (the lead's cli calls this under ``laneshift bench``)."""
+    p = subparsers.add_parser("replay", help="replay server ingest rate, sample latency, memory per transition")
+    _add_arguments(p)
+    p.set_defaults(func=run)
+
+
+def _actor_list(text: str) -> list[int]:
+    try:
+        values = [int(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--actors takes a comma-separated list of integers, got {text!r}") from None
+    if not values or any(v < 1 or v > 1024 for v in values):
+        raise argparse.ArgumentTypeError(f"--actors values must be 1..1024, got {text!r}")
+    return values
+
+
+def _add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--duration", type=float, default=3.0, help="seconds per measurement window (default 3)")
+    p.add_argument("--batch", type=int, default=32,
+                   help="transitions per message, like actor.send_every (default 32)")
+    p.add_argument("--actors", type=_actor_list, default=[2, 8, 32, 64],
+                   help="actor counts of the scaling table (default 2,8,32,64)")
+    p.add_argument("--publishers", type=int, default=2,
+                   help="publisher processes the actors are spread over (default 2)")
+    p.add_argument("--warmup", type=float, default=0.5, help="seconds of publishing before a window opens")
+    p.add_argument("--capacity-vector", type=int, default=1_000_000, help="online capacity, vector run")
+    p.add_argument("--capacity-grayscale", type=int, default=20_000, help="online capacity, grayscale run")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.duration <= 0 or args.warmup < 0:
+        raise SystemExit("--duration must be > 0 and --warmup >= 0")
+    if not 1 <= args.batch <= wire.MAX_BATCH_ROWS or args.publishers < 1:
+        raise SystemExit(f"--batch must be 1..{wire.MAX_BATCH_ROWS} and --publishers >= 1")
+    if min(args.capacity_vector, args.capacity_grayscale) < SAMPLE_BATCH:
+        raise SystemExit(f"capacities must be >= {SAMPLE_BATCH}")
+    log = sys.stderr if args.json else sys.stdout
+    try:
+        result = bench(args, log=log)
+    except BenchError as exc:
+        print(f"bench replay: {exc}", file=sys.stderr)
+        return 1
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(format_result(result))
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="laneshift bench replay", description=__doc__.splitlines()[0])
+    _add_arguments(parser)
+    return run(parser.parse_args(argv))
+
+
+# ----------------------------------------------------------------------------- synthetic publisher
+
+
+class _Patcher:
+    """A pre-encoded TRANSITIONS message whose ``seq`` and ``env_steps`` can be rewritten cheaply."""
+
+    def __init__(self, message: bytes):
+        (hlen,) = struct.unpack_from("<I", message, 8)
+        end = 12 + hlen
+        marks = []
+        for field, mark in (("seq", _SEQ_MARK), ("env_steps", _STEPS_MARK)):
+            needle = f'"{field}":{mark}'.encode()
+            pos = message.find(needle, 0, end)
+            if pos < 0 or message.find(needle, pos + 1, end) >= 0:
+                raise BenchError(f"placeholder for {field} not found exactly once in the header")
+            marks.append((pos + len(needle) - _MARK_WIDTH, field))
+        marks.sort()
+        self.order = [f for _, f in marks]
+        (a, _), (b, _) = marks
+        self.pieces = (message[:a], message[a + _MARK_WIDTH:b], message[b + _MARK_WIDTH:])
+
+    def build(self, seq: int, env_steps: int) -> bytes:
+        vals = {"seq": seq, "env_steps": env_steps}
+        p0, p1, p2 = self.pieces
+        return b"".join((p0, b"%-16d" % vals[self.order[0]], p1, b"%-16d" % vals[self.order[1]], p2))
+
+
+def synthetic_message(actor: str, schema: wire.TransitionSchema, rows: int, rng: np.random.Generator) -> _Patcher:
+    """Random but valid transitions for ``schema``, encoded once with placeholder counters."""
+    shape = (rows, *schema.obs_shape)
+    dtype = np.dtype(schema.obs_dtype)
+    if dtype.kind == "f":
+        obs = rng.standard_normal(shape).astype(dtype)
+        next_obs = rng.standard_normal(shape).astype(dtype)
+    else:
+        obs = rng.integers(0, 256, size=shape, dtype=np.uint8).astype(dtype)
+        next_obs = rng.integers(0, 256, size=shape, dtype=np.uint8).astype(dtype)
+    batch = wire.TransitionBatch.from_arrays(
+        actor=actor, seq=_SEQ_MARK, weights_version=0, phase=0, env_steps=_STEPS_MARK, obs=obs,
+        action=rng.integers(0, schema.n_actions, size=rows), reward=rng.standard_normal(rows).astype(np.float32),
+        next_obs=next_obs, terminated=(rng.random(rows) < 0.02).astype(np.uint8), truncated=np.zeros(rows, np.uint8))
+    patcher = _Patcher(wire.encode_transitions(batch))
+    check = wire.decode_transitions(patcher.build(7, 7 * rows), schema)  # the patched form is a valid message
+    if check.seq != 7 or check.env_steps != 7 * rows or check.actor != actor:
+        raise BenchError("patched message does not decode to the values written")
+    return patcher
+
+
+def _publisher_main(argv: list[str]) -> int:
+    """One synthetic-actor process: publishes for every actor key given, round robin, until SIGTERM."""
+    p = argparse.ArgumentParser(prog="python -m laneshift.bench_replay _publish")
+    p.add_argument("--router", required=True)
+    p.add_argument("--run-id", required=True)
+    p.add_argument("--actors", required=True, help="comma-separated actor names")
+    p.add_argument("--batch", type=int, required=True)
+    p.add_argument("--obs-shape", required=True, help="e.g. 67 or 4,100,100")
+    p.add_argument("--obs-dtype", required=True)
+    p.add_argument("--n-actions", type=int, required=True)
+    p.add_argument("--ready", required=True)
+    p.add_argument("--report", required=True)
+    p.add_argument("--seed", type=int, default=0)
+    a = p.parse_args(argv)
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    schema = wire.TransitionSchema(tuple(int(d) for d in a.obs_shape.split(",")), a.obs_dtype, a.n_actions)
+    actors = a.actors.split(",")
+    rng = np.random.default_rng(a.seed)
+    patchers = [synthetic_message(actor, schema, a.batch, rng) for actor in actors]
+    sent = [0] * len(actors)
+    rows = a.batch
+    with transport.open_session(TransportConfig(router=a.router, run_id=a.run_id)) as session:
+        pubs = [transport.data_publisher(session, wire.transitions_key(a.run_id, actor)) for actor in actors]
+        deadline = time.monotonic() + 60
+        while not all(pub.matching_status.matching for pub in pubs):  # the server's subscription is known
+            if stop.is_set() or time.monotonic() > deadline:
+                print("publisher: no matching subscriber", file=sys.stderr, flush=True)
+                return 3
+            time.sleep(0.01)
+        Path(a.ready).write_text("ready")
+        t0 = time.monotonic()
+        while not stop.is_set():
+            for k in range(len(pubs)):
+                s = sent[k]
+                pubs[k].put(patchers[k].build(s, (s + 1) * rows))
+                sent[k] = s + 1
+        elapsed = time.monotonic() - t0
+        report = {"actors": {actor: {"batches": n, "items": n * rows} for actor, n in zip(actors, sent)},
+                  "elapsed_s": elapsed}
+        Path(a.report).write_text(json.dumps(report))
+        time.sleep(1.0)  # let zenoh's transmit queue drain before the session closes
+    return 0
+
+
+# ----------------------------------------------------------------------------- CPU accounting
+
+
+_CLK = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
+
+
+def _proc_cpu_s(pid: int) -> float | None:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / _CLK  # utime + stime
+    except (OSError, IndexError, ValueError):
+        return None
+
+
+def _machine_busy_s() -> float | None:
+    try:
+        with open("/proc/stat") as f:
+            vals = [int(v) for v in f.readline().split()[1:]]
+        return (sum(vals[:8]) - vals[3] - vals[4]) / _CLK  # everything but idle and iowait
+    except (OSError, IndexError, ValueError):
+        return None
+
+
+class _CpuMeter:
+    """Cores used per role (server, router, publishers, bench) and by the whole machine."""
+
+    def __init__(self, roles: dict[str, list[int]]):
+        self.roles = {**roles, "bench": [os.getpid()]}
+        self.t0 = time.monotonic()
+        self.start = self._snap()
+
+    def _snap(self) -> dict[str, float | None]:
+        out: dict[str, float | None] = {}
+        for role, pids in self.roles.items():
+            vals = [_proc_cpu_s(pid) for pid in pids]
+            out[role] = None if any(v is None for v in vals) else sum(vals)  # type: ignore[arg-type]
+        out["machine"] = _machine_busy_s()
+        return out
+
+    def cores(self) -> dict[str, float | None]:
+        end, wall = self._snap(), time.monotonic() - self.t0
+        res = {k: (None if end[k] is None or self.start[k] is None else round((end[k] - self.start[k]) / wall, 2))
+               for k in end}
+        ours = [res[k] for k in self.roles]
+        if res["machine"] is not None and all(v is not None for v in ours):
+            res["other"] = round(max(0.0, res["machine"] - sum(ours)), 2)  # type: ignore[operator]
+        return res
+
+
+# ----------------------------------------------------------------------------- the benchmark
+
+
+def _free_tcp_port() -> int:
+    # Same as deploy.local.free_tcp_port; importing that module would import torch (via the learner).
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class _Bench:
+    def __init__(self, args: argparse.Namespace, work: Path, log: TextIO):
+        from laneshift.deploy.processes import ProcessGroup
+
+        self.args = args
+        self.work = work
+        self.log = log
+        self.endpoint = f"tcp/127.0.0.1:{_free_tcp_port()}"
+        self.group = ProcessGroup(work / "logs")
+        self.py = [sys.executable, "-m", "laneshift"]
+        self.session = None
+        self.n_pub = 0
+        self.live: set[str] = set()  # children that must be running now (stopped ones are removed)
+
+    def say(self, msg: str) -> None:
+        print(f"[bench replay] {msg}", file=self.log, flush=True)
+
+    # --- processes
+
+    def start_router(self) -> None:
+        self.group.start("router", [*self.py, "router", "--listen", self.endpoint])
+        self.live.add("router")
+
+    def start_server(self, name: str, observation: str, capacity: int) -> wire.TransitionSchema:
+        from laneshift.config import load_run_config, save_run_config
+        from laneshift.deploy.processes import ChildFailed, wait_for_file
+        from laneshift.envspec import env_spec
+
+        cfg = load_run_config(overrides={
+            "env.scenario": "straight", "env.observation": observation, "replay.capacity": capacity,
+            "replay.samples_per_insert": 0, "replay.min_size": 1, "transport.router": self.endpoint,
+            "transport.run_id": name, "train.run_dir": str(self.work / name)})
+        path = save_run_config(cfg, self.work / f"{name}.yaml")
+        ready = self.work / f"{name}.ready"
+        self.group.start(name, [*self.py, "replay-server", "--config", str(path), "--ready-file", str(ready)])
+        self.live.add(name)
+        try:
+            wait_for_file(ready, 120, self.group, name)
+        except ChildFailed as exc:
+            raise BenchError(str(exc)) from None
+        return env_spec(cfg.env).schema
+
+    def stop_server(self, name: str) -> None:
+        self.live.discard(name)
+        self.group.stop(name, grace_s=30)
+
+    def stats(self, run_id: str) -> dict:
+        data = transport.query(self.session, wire.replay_stats_key(run_id), b"", 10.0)
+        if data is None:
+            self.check_alive()
+            raise BenchError(f"replay server {run_id} did not answer a stats query in 10 s")
+        return wire.decode_json(data)
+
+    def check_alive(self) -> None:
+        from laneshift.deploy.processes import ChildFailed
+
+        try:
+            self.group.check_alive(sorted(self.live))
+        except ChildFailed as exc:
+            raise BenchError(str(exc)) from None
+
+    def start_publishers(self, run_id: str, schema: wire.TransitionSchema, names: list[str]) -> list[dict]:
+        from laneshift.deploy.processes import ChildFailed, wait_for_file
+
+        count = min(len(names), self.args.publishers)
+        pubs = []
+        for j in range(count):
+            self.n_pub += 1
+            tag = f"pub{self.n_pub}"
+            ready, report = self.work / f"{tag}.ready", self.work / f"{tag}.json"
+            argv = [sys.executable, "-m", "laneshift.bench_replay", "_publish", "--router", self.endpoint,
+                    "--run-id", run_id, "--actors", ",".join(names[j::count]), "--batch", str(self.args.batch),
+                    "--obs-shape", ",".join(map(str, schema.obs_shape)), "--obs-dtype", schema.obs_dtype,
+                    "--n-actions", str(schema.n_actions), "--ready", str(ready), "--report", str(report),
+                    "--seed", str(self.n_pub)]
+            proc = self.group.start(tag, argv)
+            self.live.add(tag)
+            pubs.append({"name": tag, "proc": proc, "ready": ready, "report": report})
+        try:
+            for pub in pubs:
+                wait_for_file(pub["ready"], 60, self.group, pub["name"])
+        except ChildFailed as exc:
+            self.stop_publishers(pubs)
+            raise BenchError(str(exc)) from None
+        return pubs
+
+    def stop_publishers(self, pubs: list[dict]) -> dict[str, dict]:
+        for pub in pubs:
+            self.live.discard(pub["name"])
+            if pub["proc"].poll() is None:
+                pub["proc"].send_signal(signal.SIGTERM)
+        sent: dict[str, dict] = {}
+        for pub in pubs:
+            self.group.stop(pub["name"], grace_s=20)
+            try:
+                sent.update(json.loads(pub["report"].read_text())["actors"])
+            except (OSError, ValueError, KeyError):
+                pass  # a publisher that never reported: its actors count as "unknown sent"
+        return sent
+
+    def settle(self, run_id: str, sent: dict[str, dict], timeout_s: float = 60.0) -> dict:
+        """Wait until the server stored everything sent (or stopped storing); returns the stats."""
+        deadline = time.monotonic() + timeout_s
+        last, stable_since = -1, time.monotonic()
+        while True:
+            st = self.stats(run_id)
+            got = {a: st["actors"].get(a, {}).get("items", 0) for a in sent}
+            if all(got[a] >= sent[a]["items"] for a in sent):
+                return st
+            now = time.monotonic()
+            if st["tables"]["online"]["inserted"] != last:
+                last, stable_since = st["tables"]["online"]["inserted"], now
+            elif now - stable_since > 3.0 or now > deadline:
+                return st
+            time.sleep(0.1)
+
+    # --- measurements
+
+    def ingest(self, run_id: str, schema: wire.TransitionSchema, label: str, n_actors: int,
+               sample_during: bool = False, fill_to: int | None = None) -> dict:
+        """Ingest rate with ``n_actors`` synthetic actors over one window.
+
+        ``sample_during``: time sample queries during the window. ``fill_to``: no warm-up; the
+        window runs until the table has taken ``fill_to`` items in all (the first fill of the ring,
+        when every write lands on a page never touched before).
+        """
+        a = self.args
+        names = [f"{label}a{i}" for i in range(n_actors)]
+        before = self.stats(run_id)
+        pubs = self.start_publishers(run_id, schema, names)
+        latency = None
+        try:
+            if fill_to is None:
+                time.sleep(a.warmup)
+            self.check_alive()
+            meter = _CpuMeter({"server": [self.group.procs[run_id].pid], "router": [self.group.procs["router"].pid],
+                               "publishers": [p["proc"].pid for p in pubs]})
+            s0 = self.stats(run_id)
+            if sample_during:
+                latency = self.sample_latency(run_id, schema, a.duration, warmup_n=5)
+            elif fill_to is not None:
+                deadline = time.monotonic() + FILL_TIMEOUT_S
+                while self.stats(run_id)["tables"]["online"]["inserted"] < fill_to:
+                    if time.monotonic() > deadline:
+                        raise BenchError(f"the table did not take {fill_to:,} items in {FILL_TIMEOUT_S} s")
+                    self.check_alive()
+                    time.sleep(0.05)
+            else:
+                time.sleep(a.duration)
+            s1 = self.stats(run_id)
+            cores = meter.cores()
+            self.check_alive()
+        finally:
+            sent = self.stop_publishers(pubs)
+        after = self.settle(run_id, sent)
+        window = s1["uptime_s"] - s0["uptime_s"]
+        stored = s1["tables"]["online"]["inserted"] - s0["tables"]["online"]["inserted"]
+        rate = stored / window if window > 0 else 0.0
+        actors_after = after["actors"]
+        lost = sum(actors_after.get(n, {}).get("lost_batches", 0) for n in names)
+        received = sum(actors_after.get(n, {}).get("items", 0) for n in names)
+        total_sent = sum(s["items"] for s in sent.values()) if len(sent) == len(names) else None
+        rejected = sum(after["rejected"].values()) - sum(before["rejected"].values())
+        server_cores = cores.get("server")
+        row = {"actors": n_actors, "publisher_processes": len(pubs), "ingest_per_s": round(rate, 1),
+               "us_per_transition": round(1e6 / rate, 3) if rate else None,
+               # CPU the server process spent per stored transition: unlike the rate, not skewed by
+               # other load on the machine taking cores away from the server.
+               "server_cpu_us_per_transition": round(server_cores * 1e6 / rate, 3) if rate and server_cores else None,
+               "messages_per_s": round(rate / a.batch, 1), "window_s": round(window, 3), "stored_in_window": stored,
+               "sent": total_sent, "stored": received,
+               "never_stored": None if total_sent is None else total_sent - received,
+               "lost_batches": lost, "rejected": rejected, "cores": cores}
+        if latency is not None:
+            row["sample"] = latency
+        return row
+
+    def sample_latency(self, run_id: str, schema: wire.TransitionSchema, duration: float,
+                       warmup_n: int = 20, min_n: int = 20) -> dict:
+        req = wire.encode_sample_request(wire.SampleRequest(SAMPLE_BATCH))
+        key = wire.sample_key(run_id)
+
+        def once() -> float:
+            t = time.perf_counter()
+            data = transport.query(self.session, key, req, 10.0)
+            if data is None:
+                self.check_alive()
+                raise BenchError("no reply to a sample query in 10 s")
+            if wire.peek_kind(data) == wire.Kind.ERROR:
+                raise BenchError(f"sample query refused: {wire.decode_error(data)}")
+            batch = wire.decode_batch(data, schema)
+            dt = time.perf_counter() - t
+            if batch.action.shape[0] != SAMPLE_BATCH:
+                raise BenchError(f"sample returned {batch.action.shape[0]} rows, asked {SAMPLE_BATCH}")
+            return dt
+
+        for _ in range(warmup_n):
+            once()
+        times: list[float] = []
+        end = time.perf_counter() + duration
+        while time.perf_counter() < end or len(times) < min_n:
+            times.append(once())
+        ms = np.array(times) * 1e3
+        return {"n": len(times), "p50_ms": round(float(np.percentile(ms, 50)), 3),
+                "p99_ms": round(float(np.percentile(ms, 99)), 3), "mean_ms": round(float(ms.mean()), 3),
+                "max_ms": round(float(ms.max()), 3), "reply_bytes": len(transport.query(self.session, key, req, 10.0) or b"")}
+
+
+def _zenoh_version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("eclipse-zenoh")
+    except PackageNotFoundError:
+        return "?"
+
+
+def bench(args: argparse.Namespace, log: TextIO = sys.stderr) -> dict:
+    """Run every measurement; returns the result dict (see ``format_result``)."""
+    work = Path(tempfile.mkdtemp(prefix="lsbench-replay-"))
+    b = _Bench(args, work, log)
+    ok = False
+    started = time.monotonic()
+    try:
+        b.start_router()
+        b.session = transport.open_session(TransportConfig(router=b.endpoint))
+        result: dict[str, Any] = {
+            "config": {"duration_s": args.duration, "warmup_s": args.warmup, "batch": args.batch,
+                       "publisher_processes": args.publishers, "sample_batch": SAMPLE_BATCH,
+                       "capacity_vector": args.capacity_vector, "capacity_grayscale": args.capacity_grayscale,
+                       "topology": "router process + replay-server client process + publisher client processes",
+                       "zenoh": _zenoh_version(), "cpus": os.cpu_count()},
+            "targets": {"ingest_vector_per_s": TARGET_INGEST_VECTOR_PER_S, "sample_p99_ms": TARGET_SAMPLE_P99_MS},
+        }
+
+        # Vector observations: headline ingest (2 actors), actor scaling, sample latency.
+        b.say(f"vector: starting replay server (capacity {args.capacity_vector:,})")
+        vec = b.start_server("benchvec", "vector", args.capacity_vector)
+        result["vector_obs"] = {"shape": list(vec.obs_shape), "dtype": vec.obs_dtype}
+        b.say("vector: first fill of the table with 2 actors (fresh memory pages)")
+        result["fill_vector"] = b.ingest("benchvec", vec, "vf", 2, fill_to=args.capacity_vector)
+        rows: dict[int, dict] = {}
+        for n in [2] + [n for n in args.actors if n != 2]:
+            b.say(f"vector: ingest with {n} actors for {args.duration:g} s")
+            rows[n] = b.ingest("benchvec", vec, f"v{n}", n)
+            b.say(f"  {rows[n]['ingest_per_s']:,.0f} transitions/s, cores {rows[n]['cores']}")
+        head = rows[2]
+        result["ingest_vector_per_s"] = head["ingest_per_s"]
+        result["ingest_vector"] = head
+        result["actor_scaling"] = [rows[n] for n in args.actors]
+        b.say(f"vector: sample latency, batch {SAMPLE_BATCH}, idle server, {args.duration:g} s")
+        idle = b.sample_latency("benchvec", vec, args.duration)
+        result["sample_p50_ms"], result["sample_p99_ms"] = idle["p50_ms"], idle["p99_ms"]
+        result["sample_idle"] = idle
+        b.say(f"vector: sample latency while 2 actors insert, {args.duration:g} s")
+        loaded = b.ingest("benchvec", vec, "vs", 2, sample_during=True)
+        result["sample_under_ingest"] = {**loaded.pop("sample"), "ingest_meanwhile": loaded}
+        st = b.stats("benchvec")
+        online = st["tables"]["online"]
+        result["bytes_per_transition_vector"] = online["bytes"] / online["capacity"]
+        result["server_vector_end"] = {"inserted": online["inserted"], "rejected": st["rejected"],
+                                       "lost_batches": sum(v["lost_batches"] for v in st["actors"].values())}
+        b.stop_server("benchvec")  # frees its memory before the grayscale table
+
+        # Grayscale observations: ingest with 2 actors.
+        b.say(f"grayscale: starting replay server (capacity {args.capacity_grayscale:,})")
+        gray = b.start_server("benchgray", "grayscale", args.capacity_grayscale)
+        result["grayscale_obs"] = {"shape": list(gray.obs_shape), "dtype": gray.obs_dtype}
+        b.say("grayscale: first fill of the table with 2 actors (fresh memory pages)")
+        result["fill_grayscale"] = b.ingest("benchgray", gray, "gf", 2, fill_to=args.capacity_grayscale)
+        b.say(f"grayscale: ingest with 2 actors for {args.duration:g} s")
+        g = b.ingest("benchgray", gray, "g2", 2)
+        result["ingest_grayscale_per_s"] = g["ingest_per_s"]
+        result["ingest_grayscale"] = g
+        online = b.stats("benchgray")["tables"]["online"]
+        result["bytes_per_transition_grayscale"] = online["bytes"] / online["capacity"]
+        b.stop_server("benchgray")
+
+        result["met"] = {"ingest_vector": result["ingest_vector_per_s"] >= TARGET_INGEST_VECTOR_PER_S,
+                         "sample_p99": result["sample_p99_ms"] <= TARGET_SAMPLE_P99_MS}
+        result["wall_s"] = round(time.monotonic() - started, 1)
+        ok = True
+        return result
+    finally:
+        if b.session is not None:
+            b.session.close()
+        b.group.stop_all(grace_s=20)
+        if ok:
+            shutil.rmtree(work, ignore_errors=True)
+        else:
+            print(f"[bench replay] failed; logs kept in {work / 'logs'}", file=log, flush=True)
+
+
+def _cores(c: dict) -> str:
+    f = lambda k: "-" if c.get(k) is None else f"{c[k]:.2f}"  # noqa: E731
+    return f"{f('server')}/{f('router')}/{f('publishers')}/{f('other')}"
+
+
+def format_result(r: dict) -> str:
+    cfg, v, g = r["config"], r["ingest_vector"], r["ingest_grayscale"]
+    yes = lambda ok: "met" if ok else "NOT met"  # noqa: E731
+    vs, gs = "x".join(map(str, r["vector_obs"]["shape"])), "x".join(map(str, r["grayscale_obs"]["shape"]))
+    lines = [
+        f"replay bench: {cfg['topology']}; zenoh {cfg['zenoh']}, {cfg['cpus']} cpus, loopback",
+        f"  {cfg['duration_s']:g} s per window after {cfg['warmup_s']:g} s warm-up, {cfg['batch']} transitions per "
+        f"message, actors spread over {cfg['publisher_processes']} publisher processes, CongestionControl.BLOCK",
+        "",
+        "ingest (transitions stored by the server per second, 2 actors, steady state)",
+        f"  vector    {r['vector_obs']['dtype']} ({vs}): {r['ingest_vector_per_s']:>10,.0f} /s   "
+        f"target >= {r['targets']['ingest_vector_per_s']:,}: {yes(r['met']['ingest_vector'])}",
+        f"  grayscale {r['grayscale_obs']['dtype']} ({gs}): {r['ingest_grayscale_per_s']:>8,.0f} /s   "
+        f"({r['ingest_grayscale_per_s'] * r['bytes_per_transition_grayscale'] / 1e6:,.0f} MB/s stored)",
+        f"  first fill of the table (every write on a fresh page): vector {r['fill_vector']['ingest_per_s']:,.0f} /s, "
+        f"grayscale {r['fill_grayscale']['ingest_per_s']:,.0f} /s; the rates above are after it (ring wrapping)",
+        f"  lost batches {v['lost_batches']} / {g['lost_batches']}, rejected {v['rejected']} / {g['rejected']}, "
+        f"sent but never stored {v['never_stored']} / {g['never_stored']} (vector / grayscale)",
+        "",
+        f"sample latency, SampleRequest({cfg['sample_batch']}) on vector data, query to decoded batch",
+        f"  idle server:          p50 {r['sample_p50_ms']:.2f} ms  p99 {r['sample_p99_ms']:.2f} ms  "
+        f"(n={r['sample_idle']['n']}, reply {r['sample_idle']['reply_bytes']:,} B)   "
+        f"target p99 <= {r['targets']['sample_p99_ms']:g} ms: {yes(r['met']['sample_p99'])}",
+        f"  while 2 actors insert: p50 {r['sample_under_ingest']['p50_ms']:.2f} ms  "
+        f"p99 {r['sample_under_ingest']['p99_ms']:.2f} ms  (n={r['sample_under_ingest']['n']}; ingest meanwhile "
+        f"{r['sample_under_ingest']['ingest_meanwhile']['ingest_per_s']:,.0f} /s)",
+        "",
+        f"memory per stored transition (online table bytes / capacity): vector {r['bytes_per_transition_vector']:,.0f} B, "
+        f"grayscale {r['bytes_per_transition_grayscale']:,.0f} B",
+        "",
+        "actor scaling (vector): cores = server/router/publishers/other processes on the machine",
+        f"  {'actors':>6s} {'transitions/s':>14s} {'us/transition':>14s} {'server CPU us/tr':>16s} {'msgs/s':>9s} "
+        f"{'lost':>5s} {'rejected':>8s} {'never stored':>12s}  cores",
+    ]
+    for row in r["actor_scaling"]:
+        us = "-" if row["us_per_transition"] is None else f"{row['us_per_transition']:.2f}"
+        cpu = "-" if row["server_cpu_us_per_transition"] is None else f"{row['server_cpu_us_per_transition']:.2f}"
+        lines.append(f"  {row['actors']:>6d} {row['ingest_per_s']:>14,.0f} {us:>14s} {cpu:>16s} {row['messages_per_s']:>9,.0f} "
+                     f"{row['lost_batches']:>5d} {row['rejected']:>8d} {str(row['never_stored']):>12s}  "
+                     f"{_cores(row['cores'])}")
+    lines.append(f"\ncores during the 2-actor vector window: {_cores(v['cores'])}; grayscale: {_cores(g['cores'])}")
+    lines.append(f"total wall time {r['wall_s']:.0f} s")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    if len(sys.argv) > 1 and sys.argv[1] == "_publish":
+        raise SystemExit(_publisher_main(sys.argv[2:]))
+    raise SystemExit(main(sys.argv[1:]))
