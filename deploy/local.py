@@ -135,7 +135,10 @@ def train_local(cfg: RunConfig, out: TextIO = sys.stdout, ray_address: str | Non
     run_dir.mkdir(parents=True, exist_ok=True)
     endpoint = f"tcp/{advertise_host}:{free_tcp_port()}"
     cfg = cfg.replace(transport=dataclasses.replace(cfg.transport, router=endpoint),
-                      train=dataclasses.replace(cfg.train, run_dir=str(run_dir)))
+                      train=dataclasses.replace(cfg.train, run_dir=str(run_dir)),
+                      # Local runs serve the HTTP inspection API on a free loopback port unless told otherwise.
+                      replay=cfg.replay if cfg.replay.http_port != -1 or ray_address else
+                      dataclasses.replace(cfg.replay, http_port=0))
     group = ProcessGroup(run_dir / "logs")
     ray_tmp: str | None = None
     ray_started = False
@@ -155,6 +158,7 @@ def train_local(cfg: RunConfig, out: TextIO = sys.stdout, ray_address: str | Non
         ready.unlink(missing_ok=True)
         group.start("replay-server", [*py, "replay-server", "--config", str(config_path), "--ready-file", str(ready)])
         wait_for_file(ready, 120, group, "replay-server")
+        http_port = json.loads(ready.read_text()).get("http_port")
         group.start("learner", [*py, "learner", "--config", str(config_path)])
         session = transport.open_session(cfg.transport)
         progress = Progress(out, cfg.train.env_steps)
@@ -163,6 +167,10 @@ def train_local(cfg: RunConfig, out: TextIO = sys.stdout, ray_address: str | Non
         print(f"train: run dir {run_dir}; {cfg.actor.workers} workers on {cfg.env.scenario} "
               f"({cfg.env.observation}), demo mode {cfg.replay.demo_mode}, {cfg.train.parallel}, "
               f"budget {cfg.train.env_steps:,} env steps; zenoh router {endpoint}", file=out, flush=True)
+        if http_port:
+            print(f"train: replay inspection API http://{cfg.replay.http_host}:{http_port}/stats "
+                  f"(or: laneshift replay inspect --router {endpoint} --run-id {cfg.transport.run_id})",
+                  file=out, flush=True)
 
         import ray
 

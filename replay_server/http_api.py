@@ -17,10 +17,11 @@ worker threads, so waiting for the core's lock never blocks the event loop.
 
     >>> from laneshift.config import ReplayConfig
     >>> from laneshift.wire import TransitionSchema
-    >>> from fastapi.testclient import TestClient
     >>> core = ReplayCore(ReplayConfig(capacity=100, min_size=10), TransitionSchema((3,), "float32", 9))
-    >>> TestClient(make_app(core)).get("/tables/online/items").json()["total"]
+    >>> read_items(core, "online", offset=0, limit=10, include_obs=False)["total"]
     0
+    >>> sorted(r.path for r in make_app(core).routes if r.path.startswith(("/t", "/s")))
+    ['/stats', '/tables/{name}/items']
 """
 
 from __future__ import annotations
@@ -81,6 +82,17 @@ class SafeJSONResponse(JSONResponse):
         except ValueError:  # a NaN or inf somewhere (e.g. in shard metadata): the slow path
             text = json.dumps(_finite(content), allow_nan=False, separators=(",", ":"))
         return text.encode("utf-8")
+
+
+SHORT_FLOATS_MAX = 200_000  # numbers per page up to which float32 obs are written in their shortest form
+
+
+def _obs_lists(arr: np.ndarray) -> list:
+    """Rows of ``arr`` as nested lists; float32 / float16 in their shortest decimal form (0.2, not
+    0.20000000298023224) when the page is small enough for that (numpy's shortest repr is ~1 us a number)."""
+    if arr.dtype.kind == "f" and arr.dtype.itemsize < 8 and arr.size <= SHORT_FLOATS_MAX:
+        arr = arr.astype(str).astype(np.float64)  # shortest repr, parses back to the same float32 bits
+    return arr.tolist()
 
 
 def _f32(x: Any) -> float:
@@ -206,6 +218,8 @@ def read_items(core: ReplayCore, name: str, offset: int, limit: int, include_obs
         if tree is not None and n:
             data["priority"] = np.asarray(tree.get((core.demo.size + rows) if online else rows), np.float64).copy()
         names = {i: a for a, i in core._actor_index.items()} if online else {}
+    obs = _obs_lists(data["obs"]) if include_obs else None
+    next_obs = _obs_lists(data["next_obs"]) if include_obs else None
     items = []
     for j in range(n):
         item: dict[str, Any] = {"key": int(data["key"][j] if online else keys[j])}
@@ -221,8 +235,8 @@ def read_items(core: ReplayCore, name: str, offset: int, limit: int, include_obs
         if "priority" in data:
             item["priority"] = float(data["priority"][j])
         if include_obs:
-            item["obs"] = data["obs"][j].tolist()
-            item["next_obs"] = data["next_obs"][j].tolist()
+            item["obs"] = obs[j]
+            item["next_obs"] = next_obs[j]
         items.append(item)
     end = offset + n
     return {

@@ -11,6 +11,7 @@ Run it with ``laneshift replay-server --config run.yaml``.
 from __future__ import annotations
 
 import json
+import os
 import signal
 import sys
 import threading
@@ -160,12 +161,24 @@ def run_replay_server(cfg: RunConfig, *, embedded_router: bool = False, ready_fi
     with transport.open_session(cfg.transport, mode=mode) as session:
         service = ReplayService(core, session, cfg.transport.run_id, checkpoint_dir,
                                 cfg.replay.checkpoint_every_s).start()
+        http_port = None
+        if cfg.replay.http_port >= 0:
+            from .http_api import serve_http  # imported only when asked for: fastapi takes a while
+
+            try:
+                http_thread, http_port = serve_http(core, cfg.replay.http_host, cfg.replay.http_port, stop)
+            except OSError as exc:
+                print(f"replay-server: replay.http_port {cfg.replay.http_port}: {exc}", file=sys.stderr)
+                service.stop()
+                return 2
+            print(f"replay-server: HTTP inspection API on http://{cfg.replay.http_host}:{http_port} "
+                  f"(/stats, /metrics, /docs)", flush=True)
         stats = core.stats()
         print(f"replay-server: serving run {cfg.transport.run_id!r} on {cfg.transport.router} "
               f"(mode {core.mode}, online capacity {core.online.capacity}, demo items {core.demo.size}, "
               f"demo sha256 {stats['tables']['demo']['sha256'][:12] or '-'})", flush=True)
         if ready_file:
-            Path(ready_file).write_text(json.dumps({"pid": __import__("os").getpid(), "time": time.time()}))
+            Path(ready_file).write_text(json.dumps({"pid": os.getpid(), "time": time.time(), "http_port": http_port}))
         while not stop.wait(0.5):
             pass
         service.stop()

@@ -76,7 +76,8 @@ def _add_train(sub: argparse._SubParsersAction) -> None:
 def _replay_server(args: argparse.Namespace) -> int:
     from laneshift.replay_server.service import run_replay_server
 
-    return run_replay_server(_config_from(args), embedded_router=args.embedded_router, ready_file=args.ready_file)
+    cfg = _config_from(args, {"replay.http_port": args.http_port, "replay.http_host": args.http_host})
+    return run_replay_server(cfg, embedded_router=args.embedded_router, ready_file=args.ready_file)
 
 
 def _learner(args: argparse.Namespace) -> int:
@@ -96,6 +97,8 @@ def _add_services(sub: argparse._SubParsersAction) -> None:
     _add_config_args(p)
     p.add_argument("--embedded-router", action="store_true", help="be the zenoh router too (listen on transport.router)")
     p.add_argument("--ready-file", help="write this file once serving (used by the launcher)")
+    p.add_argument("--http-port", type=int, help="serve the HTTP inspection API on this port (0 = a free one)")
+    p.add_argument("--http-host", help="bind address of the HTTP API (default 127.0.0.1: loopback only)")
     p.set_defaults(func=_replay_server)
     p = sub.add_parser("learner", help="run the learner process")
     _add_config_args(p)

@@ -139,6 +139,8 @@ class ReplayConfig:
     # samples; kill -9 loses at most about one interval of agent experience. 0 = only at shutdown.
     checkpoint_every_s: float = 60.0
     restore: bool = True  # restore the online table from the run dir's checkpoint at start
+    http_port: int = -1  # HTTP inspection API: -1 off, 0 a free port, else that port
+    http_host: str = "127.0.0.1"  # bind elsewhere only on purpose: the API has no authentication
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -148,6 +150,8 @@ class ReplayConfig:
             _check(0.0 <= getattr(self, name) <= 1.0, f"replay.{name}", "must be in [0, 1]", getattr(self, name))
         _check(self.priority_eps > 0, "replay.priority_eps", "must be > 0", self.priority_eps)
         _check(self.demo_priority_bonus >= 0, "replay.demo_priority_bonus", "must be >= 0", self.demo_priority_bonus)
+        _check(-1 <= self.http_port <= 65535, "replay.http_port", "must be -1 (off), 0 (any free port) or a port",
+               self.http_port)
         _check(self.checkpoint_every_s >= 0, "replay.checkpoint_every_s", "must be >= 0", self.checkpoint_every_s)
         _check(self.capacity >= 2, "replay.capacity", "must be >= 2", self.capacity)
         _check(self.demo_mode in ("none", "retention", "rehearsal"), "replay.demo_mode",
