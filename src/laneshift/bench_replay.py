@@ -27,6 +27,7 @@ Measured:
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import shutil
@@ -43,12 +44,13 @@ from typing import Any, TextIO
 import numpy as np
 
 from laneshift import transport, wire
-from laneshift.config import TransportConfig
+from laneshift.config import ReplayConfig, TransportConfig
 
 TARGET_INGEST_VECTOR_PER_S = 200_000
 TARGET_SAMPLE_P99_MS = 5.0
 SAMPLE_BATCH = 256
 FILL_TIMEOUT_S = 300
+DRAIN_S = 0.1  # publisher: pause between its last put and closing the session (none lost without it, measured)
 # Placeholders written by wire.encode_transitions, then overwritten in place with the real values
 # padded by spaces to the same width (JSON allows whitespace after a number), so each message costs
 # one join instead of a full encode. 16 digits, below the wire's 2**53 bound for header integers.
@@ -90,6 +92,9 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--publishers", type=int, default=2,
                    help="publisher processes the actors are spread over (default 2)")
     p.add_argument("--warmup", type=float, default=0.5, help="seconds of publishing before a window opens")
+    p.add_argument("--paced-rate", type=float, default=20_000,
+                   help="transitions/s of the paced-ingest sample-latency run (default 20000, about 15x what "
+                        "2 training workers produce; 0 skips it)")
     p.add_argument("--capacity-vector", type=int, default=1_000_000, help="online capacity, vector run")
     p.add_argument("--capacity-grayscale", type=int, default=20_000, help="online capacity, grayscale run")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
@@ -182,6 +187,7 @@ def _publisher_main(argv: list[str]) -> int:
     p.add_argument("--ready", required=True)
     p.add_argument("--report", required=True)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--rate", type=float, default=0.0, help="transitions/s for this process (0 = as fast as possible)")
     a = p.parse_args(argv)
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -202,16 +208,25 @@ def _publisher_main(argv: list[str]) -> int:
             time.sleep(0.01)
         Path(a.ready).write_text("ready")
         t0 = time.monotonic()
+        total = 0
+        parent = os.getppid()
         while not stop.is_set():
+            if os.getppid() != parent:  # the bench died without stopping us
+                break
             for k in range(len(pubs)):
                 s = sent[k]
                 pubs[k].put(patchers[k].build(s, (s + 1) * rows))
                 sent[k] = s + 1
+                total += rows
+                if a.rate > 0:  # paced: sleep until this message's slot
+                    ahead = t0 + total / a.rate - time.monotonic()
+                    if ahead > 0:
+                        stop.wait(ahead)
         elapsed = time.monotonic() - t0
         report = {"actors": {actor: {"batches": n, "items": n * rows} for actor, n in zip(actors, sent)},
                   "elapsed_s": elapsed}
         Path(a.report).write_text(json.dumps(report))
-        time.sleep(1.0)  # let zenoh's transmit queue drain before the session closes
+        time.sleep(DRAIN_S)  # let zenoh's transmit queue drain before the session closes
     return 0
 
 
@@ -287,26 +302,45 @@ class _Bench:
         self.py = [sys.executable, "-m", "laneshift"]
         self.session = None
         self.n_pub = 0
+        self.t0 = time.monotonic()
         self.live: set[str] = set()  # children that must be running now (stopped ones are removed)
 
     def say(self, msg: str) -> None:
-        print(f"[bench replay] {msg}", file=self.log, flush=True)
+        print(f"[bench replay {time.monotonic() - self.t0:5.1f}s] {msg}", file=self.log, flush=True)
 
     # --- processes
 
     def start_router(self) -> None:
         self.group.start("router", [*self.py, "router", "--listen", self.endpoint])
         self.live.add("router")
+        # A zenoh client retries forever: make sure the router listens before opening a session.
+        host, port = self.endpoint.split("/", 1)[1].rsplit(":", 1)
+        deadline = time.monotonic() + 60
+        while True:
+            self.check_alive()
+            try:
+                socket.create_connection((host, int(port)), timeout=1).close()
+                return
+            except OSError:
+                if time.monotonic() > deadline:
+                    raise BenchError(f"the router did not listen on {self.endpoint} within 60 s") from None
+                time.sleep(0.05)
 
     def start_server(self, name: str, observation: str, capacity: int) -> wire.TransitionSchema:
         from laneshift.config import load_run_config, save_run_config
         from laneshift.deploy.processes import ChildFailed, wait_for_file
         from laneshift.envspec import env_spec
 
-        cfg = load_run_config(overrides={
+        overrides: dict[str, Any] = {
             "env.scenario": "straight", "env.observation": observation, "replay.capacity": capacity,
             "replay.samples_per_insert": 0, "replay.min_size": 1, "transport.router": self.endpoint,
-            "transport.run_id": name, "train.run_dir": str(self.work / name)})
+            "transport.run_id": name, "train.run_dir": str(self.work / name)}
+        fields = {f.name for f in dataclasses.fields(ReplayConfig)}
+        if "checkpoint_every_s" in fields:
+            overrides["replay.checkpoint_every_s"] = 0  # no periodic table checkpoint inside a window
+        if "restore" in fields:
+            overrides["replay.restore"] = False
+        cfg = load_run_config(overrides=overrides)
         path = save_run_config(cfg, self.work / f"{name}.yaml")
         ready = self.work / f"{name}.ready"
         self.group.start(name, [*self.py, "replay-server", "--config", str(path), "--ready-file", str(ready)])
@@ -318,8 +352,13 @@ class _Bench:
         return env_spec(cfg.env).schema
 
     def stop_server(self, name: str) -> None:
+        """SIGKILL: the table is throwaway, and a clean stop would write it to disk as a final
+        checkpoint (up to 1.6 GB for the grayscale table)."""
         self.live.discard(name)
-        self.group.stop(name, grace_s=30)
+        proc = self.group.procs[name]
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(30)
 
     def stats(self, run_id: str) -> dict:
         data = transport.query(self.session, wire.replay_stats_key(run_id), b"", 10.0)
@@ -336,7 +375,8 @@ class _Bench:
         except ChildFailed as exc:
             raise BenchError(str(exc)) from None
 
-    def start_publishers(self, run_id: str, schema: wire.TransitionSchema, names: list[str]) -> list[dict]:
+    def start_publishers(self, run_id: str, schema: wire.TransitionSchema, names: list[str],
+                         rate: float = 0.0) -> list[dict]:
         from laneshift.deploy.processes import ChildFailed, wait_for_file
 
         count = min(len(names), self.args.publishers)
@@ -349,7 +389,7 @@ class _Bench:
                     "--run-id", run_id, "--actors", ",".join(names[j::count]), "--batch", str(self.args.batch),
                     "--obs-shape", ",".join(map(str, schema.obs_shape)), "--obs-dtype", schema.obs_dtype,
                     "--n-actions", str(schema.n_actions), "--ready", str(ready), "--report", str(report),
-                    "--seed", str(self.n_pub)]
+                    "--seed", str(self.n_pub), "--rate", str(rate / count)]
             proc = self.group.start(tag, argv)
             self.live.add(tag)
             pubs.append({"name": tag, "proc": proc, "ready": ready, "report": report})
@@ -394,17 +434,18 @@ class _Bench:
     # --- measurements
 
     def ingest(self, run_id: str, schema: wire.TransitionSchema, label: str, n_actors: int,
-               sample_during: bool = False, fill_to: int | None = None) -> dict:
+               sample_during: bool = False, fill_to: int | None = None, rate: float = 0.0) -> dict:
         """Ingest rate with ``n_actors`` synthetic actors over one window.
 
-        ``sample_during``: time sample queries during the window. ``fill_to``: no warm-up; the
+        ``sample_during``: time sample queries during the window. ``rate``: publishers paced to this
+        many transitions/s in all (0 = as fast as they can). ``fill_to``: no warm-up; the
         window runs until the table has taken ``fill_to`` items in all (the first fill of the ring,
         when every write lands on a page never touched before).
         """
         a = self.args
         names = [f"{label}a{i}" for i in range(n_actors)]
         before = self.stats(run_id)
-        pubs = self.start_publishers(run_id, schema, names)
+        pubs = self.start_publishers(run_id, schema, names, rate)
         latency = None
         try:
             if fill_to is None:
@@ -414,7 +455,7 @@ class _Bench:
                                "publishers": [p["proc"].pid for p in pubs]})
             s0 = self.stats(run_id)
             if sample_during:
-                latency = self.sample_latency(run_id, schema, a.duration, warmup_n=5)
+                latency = self.sample_latency(run_id, schema, a.duration, warmup_n=3, min_n=5)
             elif fill_to is not None:
                 deadline = time.monotonic() + FILL_TIMEOUT_S
                 while self.stats(run_id)["tables"]["online"]["inserted"] < fill_to:
@@ -478,9 +519,10 @@ class _Bench:
         while time.perf_counter() < end or len(times) < min_n:
             times.append(once())
         ms = np.array(times) * 1e3
+        reply = transport.query(self.session, key, req, 10.0) or b""
         return {"n": len(times), "p50_ms": round(float(np.percentile(ms, 50)), 3),
                 "p99_ms": round(float(np.percentile(ms, 99)), 3), "mean_ms": round(float(ms.mean()), 3),
-                "max_ms": round(float(ms.max()), 3), "reply_bytes": len(transport.query(self.session, key, req, 10.0) or b"")}
+                "max_ms": round(float(ms.max()), 3), "reply_bytes": len(reply)}
 
 
 def _zenoh_version() -> str:
@@ -498,6 +540,12 @@ def bench(args: argparse.Namespace, log: TextIO = sys.stderr) -> dict:
     b = _Bench(args, work, log)
     ok = False
     started = time.monotonic()
+
+    def on_term(*_: Any) -> None:
+        raise BenchError("terminated")  # unwinds through the finally below: every child is stopped
+
+    in_main = threading.current_thread() is threading.main_thread()
+    old_term = signal.signal(signal.SIGTERM, on_term) if in_main else None
     try:
         b.start_router()
         b.session = transport.open_session(TransportConfig(router=b.endpoint))
@@ -505,6 +553,7 @@ def bench(args: argparse.Namespace, log: TextIO = sys.stderr) -> dict:
             "config": {"duration_s": args.duration, "warmup_s": args.warmup, "batch": args.batch,
                        "publisher_processes": args.publishers, "sample_batch": SAMPLE_BATCH,
                        "capacity_vector": args.capacity_vector, "capacity_grayscale": args.capacity_grayscale,
+                       "paced_rate": args.paced_rate,
                        "topology": "router process + replay-server client process + publisher client processes",
                        "zenoh": _zenoh_version(), "cpus": os.cpu_count()},
             "targets": {"ingest_vector_per_s": TARGET_INGEST_VECTOR_PER_S, "sample_p99_ms": TARGET_SAMPLE_P99_MS},
@@ -529,14 +578,21 @@ def bench(args: argparse.Namespace, log: TextIO = sys.stderr) -> dict:
         idle = b.sample_latency("benchvec", vec, args.duration)
         result["sample_p50_ms"], result["sample_p99_ms"] = idle["p50_ms"], idle["p99_ms"]
         result["sample_idle"] = idle
-        b.say(f"vector: sample latency while 2 actors insert, {args.duration:g} s")
+        b.say(f"vector: sample latency while 2 actors insert as fast as they can, {args.duration:g} s")
         loaded = b.ingest("benchvec", vec, "vs", 2, sample_during=True)
-        result["sample_under_ingest"] = {**loaded.pop("sample"), "ingest_meanwhile": loaded}
+        result["sample_under_saturating_ingest"] = {**loaded.pop("sample"), "ingest_meanwhile": loaded}
+        if args.paced_rate > 0:
+            b.say(f"vector: sample latency while 2 actors insert {args.paced_rate:,.0f} transitions/s, "
+                  f"{args.duration:g} s")
+            paced = b.ingest("benchvec", vec, "vp", 2, sample_during=True, rate=args.paced_rate)
+            result["sample_under_paced_ingest"] = {**paced.pop("sample"), "offered_per_s": args.paced_rate,
+                                                   "ingest_meanwhile": paced}
         st = b.stats("benchvec")
         online = st["tables"]["online"]
         result["bytes_per_transition_vector"] = online["bytes"] / online["capacity"]
         result["server_vector_end"] = {"inserted": online["inserted"], "rejected": st["rejected"],
-                                       "lost_batches": sum(v["lost_batches"] for v in st["actors"].values())}
+                                       "lost_batches": sum(v["lost_batches"] for v in st["actors"].values()),
+                                       "sampler": st.get("sampler", {}).get("kind", "uniform")}
         b.stop_server("benchvec")  # frees its memory before the grayscale table
 
         # Grayscale observations: ingest with 2 actors.
@@ -561,7 +617,12 @@ def bench(args: argparse.Namespace, log: TextIO = sys.stderr) -> dict:
     finally:
         if b.session is not None:
             b.session.close()
+        for name in ("benchvec", "benchgray"):
+            if name in b.group.procs:
+                b.stop_server(name)
         b.group.stop_all(grace_s=20)
+        if old_term is not None:
+            signal.signal(signal.SIGTERM, old_term)
         if ok:
             shutil.rmtree(work, ignore_errors=True)
         else:
@@ -571,6 +632,19 @@ def bench(args: argparse.Namespace, log: TextIO = sys.stderr) -> dict:
 def _cores(c: dict) -> str:
     f = lambda k: "-" if c.get(k) is None else f"{c[k]:.2f}"  # noqa: E731
     return f"{f('server')}/{f('router')}/{f('publishers')}/{f('other')}"
+
+
+def _loaded_lines(r: dict) -> list[str]:
+    out = []
+    for key, what in (("sample_under_paced_ingest", "2 actors paced to {:,.0f}/s"),
+                      ("sample_under_saturating_ingest", "2 actors flat out")):
+        x = r.get(key)
+        if x is None:
+            continue
+        label = what.format(x.get("offered_per_s", 0)) + ":"
+        out.append(f"  {label:33s} p50 {x['p50_ms']:.2f} ms  p99 {x['p99_ms']:.2f} ms  max {x['max_ms']:.1f} ms  "
+                   f"(n={x['n']}; stored meanwhile {x['ingest_meanwhile']['ingest_per_s']:,.0f} /s)")
+    return out
 
 
 def format_result(r: dict) -> str:
@@ -593,15 +667,13 @@ def format_result(r: dict) -> str:
         f"sent but never stored {v['never_stored']} / {g['never_stored']} (vector / grayscale)",
         "",
         f"sample latency, SampleRequest({cfg['sample_batch']}) on vector data, query to decoded batch",
-        f"  idle server:          p50 {r['sample_p50_ms']:.2f} ms  p99 {r['sample_p99_ms']:.2f} ms  "
+        f"  {'idle server:':33s} p50 {r['sample_p50_ms']:.2f} ms  p99 {r['sample_p99_ms']:.2f} ms  "
         f"(n={r['sample_idle']['n']}, reply {r['sample_idle']['reply_bytes']:,} B)   "
         f"target p99 <= {r['targets']['sample_p99_ms']:g} ms: {yes(r['met']['sample_p99'])}",
-        f"  while 2 actors insert: p50 {r['sample_under_ingest']['p50_ms']:.2f} ms  "
-        f"p99 {r['sample_under_ingest']['p99_ms']:.2f} ms  (n={r['sample_under_ingest']['n']}; ingest meanwhile "
-        f"{r['sample_under_ingest']['ingest_meanwhile']['ingest_per_s']:,.0f} /s)",
+        *_loaded_lines(r),
         "",
-        f"memory per stored transition (online table bytes / capacity): vector {r['bytes_per_transition_vector']:,.0f} B, "
-        f"grayscale {r['bytes_per_transition_grayscale']:,.0f} B",
+        f"memory per stored transition (online table bytes / capacity): "
+        f"vector {r['bytes_per_transition_vector']:,.0f} B, grayscale {r['bytes_per_transition_grayscale']:,.0f} B",
         "",
         "actor scaling (vector): cores = server/router/publishers/other processes on the machine",
         f"  {'actors':>6s} {'transitions/s':>14s} {'us/transition':>14s} {'server CPU us/tr':>16s} {'msgs/s':>9s} "
@@ -610,9 +682,9 @@ def format_result(r: dict) -> str:
     for row in r["actor_scaling"]:
         us = "-" if row["us_per_transition"] is None else f"{row['us_per_transition']:.2f}"
         cpu = "-" if row["server_cpu_us_per_transition"] is None else f"{row['server_cpu_us_per_transition']:.2f}"
-        lines.append(f"  {row['actors']:>6d} {row['ingest_per_s']:>14,.0f} {us:>14s} {cpu:>16s} {row['messages_per_s']:>9,.0f} "
-                     f"{row['lost_batches']:>5d} {row['rejected']:>8d} {str(row['never_stored']):>12s}  "
-                     f"{_cores(row['cores'])}")
+        lines.append(f"  {row['actors']:>6d} {row['ingest_per_s']:>14,.0f} {us:>14s} {cpu:>16s} "
+                     f"{row['messages_per_s']:>9,.0f} {row['lost_batches']:>5d} {row['rejected']:>8d} "
+                     f"{str(row['never_stored']):>12s}  {_cores(row['cores'])}")
     lines.append(f"\ncores during the 2-actor vector window: {_cores(v['cores'])}; grayscale: {_cores(g['cores'])}")
     lines.append(f"total wall time {r['wall_s']:.0f} s")
     return "\n".join(lines)

@@ -167,8 +167,10 @@ def build_parser() -> argparse.ArgumentParser:
     bench = sub.add_parser("bench", help="benchmarks (env speed, replay throughput)")
     bench_sub = bench.add_subparsers(dest="bench_cmd", required=True, metavar="WHAT")
     from laneshift.bench_env import register as register_bench_env
+    from laneshift.bench_replay import register as register_bench_replay
 
     register_bench_env(bench_sub)
+    register_bench_replay(bench_sub)
     return parser
 
 

@@ -1,0 +1,68 @@
+"""`laneshift bench replay`: a tiny end-to-end run (real router, replay-server and publisher
+processes) returns every JSON field with sane values, and leaves no process behind. No timing
+thresholds: speed depends on the machine."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from laneshift import bench_replay, wire
+
+
+def _children(pid: int) -> set[int]:
+    out = set()
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                if int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1]) == pid:
+                    out.add(int(entry.name))
+            except (OSError, IndexError, ValueError):
+                pass
+    return out
+
+
+def test_bench_replay_json_end_to_end(capsys) -> None:
+    parser = argparse.ArgumentParser()
+    bench_replay.register(parser.add_subparsers())
+    args = parser.parse_args(["replay", "--duration", "0.3", "--warmup", "0.1", "--actors", "2",
+                              "--capacity-vector", "2000", "--capacity-grayscale", "300", "--paced-rate", "2000",
+                              "--json"])
+    before = _children(os.getpid())
+    assert args.func(args) == 0
+    out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+
+    for key in ("ingest_vector_per_s", "ingest_grayscale_per_s", "sample_p50_ms", "sample_p99_ms"):
+        assert out[key] > 0, key
+    assert out["sample_p50_ms"] <= out["sample_p99_ms"]
+    assert out["vector_obs"] == {"shape": [67], "dtype": "<f4"}
+    assert out["grayscale_obs"] == {"shape": [4, 100, 100], "dtype": "|u1"}
+    # Bytes per stored transition: at least the two observations, plus a few fixed columns.
+    assert 2 * 67 * 4 < out["bytes_per_transition_vector"] < 2 * 67 * 4 + 64
+    assert 2 * 40_000 < out["bytes_per_transition_grayscale"] < 2 * 40_000 + 64
+    assert [row["actors"] for row in out["actor_scaling"]] == [2]
+    for run in (out["ingest_vector"], out["ingest_grayscale"], *out["actor_scaling"],
+                out["fill_vector"], out["fill_grayscale"]):
+        assert run["ingest_per_s"] > 0 and run["stored_in_window"] > 0
+        assert run["lost_batches"] == 0 and run["rejected"] == 0
+        assert run["never_stored"] == 0 and run["sent"] == run["stored"] > 0  # BLOCK: nothing lost
+    for key in ("sample_under_saturating_ingest", "sample_under_paced_ingest"):
+        lat = out[key]
+        assert lat["n"] >= 5 and 0 < lat["p50_ms"] <= lat["p99_ms"] <= lat["max_ms"]
+    assert out["sample_idle"]["reply_bytes"] > bench_replay.SAMPLE_BATCH * 2 * 67 * 4
+    assert set(out["met"]) == {"ingest_vector", "sample_p99"}
+    text = bench_replay.format_result(out)  # the text form renders from the same dict
+    assert "actor scaling" in text and "sample latency" in text
+    assert _children(os.getpid()) <= before  # every router, server and publisher was stopped
+
+
+def test_patched_messages_decode_with_their_counters() -> None:
+    schema = wire.TransitionSchema((67,), "float32", 9)
+    patcher = bench_replay.synthetic_message("w3", schema, 4, np.random.default_rng(0))
+    for seq in (0, 1, 99, 123_456_789):
+        batch = wire.decode_transitions(patcher.build(seq, (seq + 1) * 4), schema)
+        assert (batch.actor, batch.seq, batch.env_steps, len(batch)) == ("w3", seq, (seq + 1) * 4, 4)
