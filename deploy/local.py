@@ -188,6 +188,7 @@ def train_local(cfg: RunConfig, out: TextIO = sys.stdout, ray_address: str | Non
         while pending:
             ready_refs, pending = ray.wait(pending, timeout=cfg.train.log_every_s)
             done += ready_refs
+            _supervise_replay_server(group, out)
             group.check_alive()
             progress.show()
         summaries = ray.get(done)
@@ -219,6 +220,21 @@ def train_local(cfg: RunConfig, out: TextIO = sys.stdout, ray_address: str | Non
             session.close()
         group.stop_all()
     return rc
+
+
+REPLAY_RESTARTS = 3
+
+
+def _supervise_replay_server(group: ProcessGroup, out: TextIO) -> None:
+    """A replay server that died is started again: it restores its last checkpoint, and actors
+    and learner carry on through the router (what was sent meanwhile counts as lost batches)."""
+    proc = group.procs["replay-server"]
+    if proc.poll() is None:
+        return
+    code = proc.returncode
+    if group.restart_if_dead("replay-server", REPLAY_RESTARTS):
+        print(f"\ntrain: replay server exited with code {code}; restarted it "
+              f"({group.restarts['replay-server']}/{REPLAY_RESTARTS}), restoring its checkpoint", file=out, flush=True)
 
 
 def _summary(cfg: RunConfig, run_dir: Path, summaries: list[dict], last: dict, wall: float, out: TextIO) -> dict:

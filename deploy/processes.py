@@ -23,6 +23,8 @@ class ProcessGroup:
         self.log_dir = Path(log_dir)
         self.log_dir.mkdir(parents=True, exist_ok=True)
         self.procs: dict[str, subprocess.Popen] = {}
+        self.argv: dict[str, list[str]] = {}
+        self.restarts: dict[str, int] = {}
 
     def start(self, name: str, argv: list[str]) -> subprocess.Popen:
         log = (self.log_dir / f"{name}.log").open("ab")
@@ -30,7 +32,19 @@ class ProcessGroup:
         proc = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env)
         log.close()
         self.procs[name] = proc
+        self.argv[name] = list(argv)
         return proc
+
+    def restart_if_dead(self, name: str, max_restarts: int) -> bool:
+        """Start ``name`` again with the same command if it exited; False once out of restarts."""
+        proc = self.procs[name]
+        if proc.poll() is None:
+            return True
+        if self.restarts.get(name, 0) >= max_restarts:
+            return False
+        self.restarts[name] = self.restarts.get(name, 0) + 1
+        self.start(name, self.argv[name])
+        return True
 
     def log_tail(self, name: str, lines: int = 15) -> str:
         path = self.log_dir / f"{name}.log"

@@ -30,7 +30,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from .core import ReplayCore
 
 FORMAT = 1
-COLUMNS = ("obs", "next_obs", "action", "reward", "terminated", "truncated", "actor", "version", "key")
+COLUMNS = ("obs", "next_obs", "action", "reward", "terminated", "truncated", "actor", "version", "seq", "key")
 CHUNK_BYTES = 4 * 2**20  # rows copied per lock hold: ~4 MiB
 
 
@@ -107,6 +107,13 @@ def restore_checkpoint(core: "ReplayCore", directory: str | Path) -> int:
         table.inserted = n
         core.actors.update({k: dict(v) for k, v in meta.get("actors", {}).items()})
         core._actor_index.update({k: int(v) for k, v in meta.get("actor_index", {}).items()})
+        # Each actor's last batch is the newest one whose items are really here (the stats in
+        # meta.json were read after the chunked copy and may name batches it missed), so every
+        # batch missing after a restart shows up as a seq gap, i.e. as lost.
+        for name, index in core._actor_index.items():
+            mine = table.actor[:n] == index
+            if name in core.actors and mine.any():
+                core.actors[name]["last_seq"] = int(table.seq[:n][mine].max())
         if core.mode == "rehearsal" and meta.get("mode") == "rehearsal":
             core.phase = max(core.phase, int(meta.get("phase", core.phase)))
     return n

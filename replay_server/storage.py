@@ -31,6 +31,7 @@ class RingTable:
         self.actor = np.zeros(self.capacity, np.int16)  # index into the server's actor list
         self.version = np.zeros(self.capacity, np.int64)  # weights version that acted
         self.key = np.full(self.capacity, -1, np.int64)  # each row's item key (-1: empty)
+        self.seq = np.full(self.capacity, -1, np.int64)  # the actor's batch seq the item came in
         self.inserted = 0  # total items ever inserted (the next item's key)
 
     @property
@@ -40,7 +41,7 @@ class RingTable:
     @property
     def nbytes(self) -> int:
         return sum(a.nbytes for a in (self.obs, self.next_obs, self.action, self.reward, self.terminated,
-                                      self.truncated, self.actor, self.version, self.key))
+                                      self.truncated, self.actor, self.version, self.key, self.seq))
 
     def insert(self, batch: TransitionBatch, actor_index: int) -> np.ndarray:
         """Store a validated batch; returns the keys of the items stored."""
@@ -57,6 +58,7 @@ class RingTable:
         self.actor[rows] = actor_index
         self.version[rows] = batch.weights_version
         self.key[rows] = keys
+        self.seq[rows] = batch.seq
         self.inserted += n
         return keys
 
