@@ -10,13 +10,14 @@ import threading
 
 import zenoh
 
-from laneshift.transport import session_config
+from laneshift.transport import session_config, use_service_runtime
 
 
 def run_router(listen: str) -> int:
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
+    use_service_runtime()
     with zenoh.open(session_config(listen, "router")):
         print(f"router: listening on {listen}", flush=True)
         stop.wait()

@@ -32,9 +32,13 @@ class ReplayService:
     """Wires a ReplayCore to a zenoh session. ``start()`` returns at once; ``stop()`` joins."""
 
     def __init__(self, core: ReplayCore, session: zenoh.Session, run_id: str,
-                 checkpoint_dir: Path | None = None, checkpoint_every_s: float = 0.0):
+                 checkpoint_dir: Path | None = None, checkpoint_every_s: float = 0.0,
+                 ingest_session: zenoh.Session | None = None):
         self.core = core
         self.session = session
+        # Transitions arrive on a session of their own, so a backlog of them (back-pressure) never
+        # queues sample queries behind it.
+        self.ingest_session = ingest_session or session
         self.run_id = run_id
         self.checkpoint_dir, self.checkpoint_every_s = checkpoint_dir, checkpoint_every_s
         self.stop_event = threading.Event()
@@ -42,7 +46,8 @@ class ReplayService:
         self._checkpoint_lock = threading.Lock()  # one checkpoint at a time (periodic vs final)
 
     def start(self) -> "ReplayService":
-        sub = self.session.declare_subscriber(wire.transitions_wildcard(self.run_id), zenoh.handlers.FifoChannel(1024))
+        sub = self.ingest_session.declare_subscriber(wire.transitions_wildcard(self.run_id),
+                                                     zenoh.handlers.FifoChannel(1024))
         ingest = threading.Thread(target=self._ingest_loop, args=(sub,), name="replay-ingest", daemon=True)
         ingest.start()
         self._threads.append(ingest)
@@ -158,9 +163,11 @@ def run_replay_server(cfg: RunConfig, *, embedded_router: bool = False, ready_fi
             return 2
         print(f"replay-server: restored {restored} items from {checkpoint_dir}", flush=True)
     mode = "router" if embedded_router else "client"
-    with transport.open_session(cfg.transport, mode=mode) as session:
+    transport.use_service_runtime()
+    with transport.open_session(cfg.transport, mode=mode) as session, \
+            transport.open_session(cfg.transport, mode="client") as ingest_session:
         service = ReplayService(core, session, cfg.transport.run_id, checkpoint_dir,
-                                cfg.replay.checkpoint_every_s).start()
+                                cfg.replay.checkpoint_every_s, ingest_session).start()
         http_port = None
         if cfg.replay.http_port >= 0:
             from .http_api import serve_http  # imported only when asked for: fastapi takes a while

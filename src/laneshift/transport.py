@@ -16,6 +16,7 @@ messages in a measurement on this machine.
 from __future__ import annotations
 
 import json
+import os
 import threading
 import time
 from typing import Callable
@@ -43,6 +44,18 @@ def session_config(endpoint: str, mode: str) -> zenoh.Config:
         conf.insert_json5("connect/timeout_ms", "-1")
         conf.insert_json5("connect/exit_on_failure", "false")
     return conf
+
+
+# zenoh's default of 2 receive threads lets a saturated ingest link (blocked by back-pressure,
+# as BLOCK intends) hold them all, so sample queries wait behind the whole backlog: measured
+# p50 190 ms with actors publishing flat out, 1.1 ms with 4 threads and ingest on its own
+# session (docs/replay-bench.md). Read when the first session of a process opens.
+SERVICE_RUNTIME = "(rx: (worker_threads: 4))"
+
+
+def use_service_runtime() -> None:
+    """Call before the first session of a router or replay-server process opens."""
+    os.environ.setdefault("ZENOH_RUNTIME", SERVICE_RUNTIME)
 
 
 def open_session(cfg: TransportConfig, mode: str = "client") -> zenoh.Session:
