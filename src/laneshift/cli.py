@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 from typing import Any
 
 from .config import ConfigError, RunConfig, load_run_config
@@ -117,6 +118,13 @@ def _eval(args: argparse.Namespace) -> int:
     cfg = _config_from(args, {"env.scenario": args.scenario, "env.initial_lane": args.initial_lane,
                               "env.max_steps": args.max_steps, "env.observation": args.observation})
     result = evaluate_checkpoint(args.checkpoint, cfg.env, episodes=args.episodes, seed=args.seed)
+    if cfg.env.is_lka:
+        from laneshift.evaluate import load_greedy_policy, lka_response, plot_lka_response
+
+        greedy = load_greedy_policy(args.checkpoint)
+        resp = lka_response(lambda env: greedy)
+        png = plot_lka_response(resp, args.png or Path(args.checkpoint).with_suffix(".lka_response.png"))
+        result["lka_response"] = {k: v for k, v in resp.items() if k != "trace"} | {"png": str(png)}
     print(json.dumps(result) if args.json else format_result(result))
     return 0
 
@@ -137,6 +145,7 @@ def _add_inspection(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--observation", choices=["vector", "grayscale"])
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", action="store_true")
+    p.add_argument("--png", help="LKA: where to write the response plot (default: next to the checkpoint)")
     _add_config_args(p)
     p.set_defaults(func=_eval)
     p = sub.add_parser("replay", help="talk to a running replay server")

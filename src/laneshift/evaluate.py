@@ -14,6 +14,7 @@ import math
 from pathlib import Path
 from typing import Callable
 
+import gymnasium as gym
 import numpy as np
 
 from .config import EnvConfig
@@ -30,8 +31,15 @@ def wilson_ci95(successes: int, n: int) -> tuple[float, float]:
     return (max(0.0, centre - half), min(1.0, centre + half))
 
 
-def evaluate_policy(policy: Callable[[np.ndarray], int], env_cfg: EnvConfig, episodes: int, seed: int = 0) -> dict:
+Policy = Callable[[np.ndarray], int]
+
+
+def evaluate_policy(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig, episodes: int,
+                    seed: int = 0) -> dict:
+    """``make_policy(env)`` returns the policy (obs -> action) to evaluate on that env; scripted
+    drivers read the env's state, a network ignores it: ``lambda env: greedy``."""
     env = make_env(env_cfg)
+    policy = make_policy(env)
     returns, lengths, survived, achieved = [], [], 0, 0
     try:
         for ep in range(episodes):
@@ -74,7 +82,85 @@ def load_greedy_policy(checkpoint: str | Path) -> Callable[[np.ndarray], int]:
 
 
 def evaluate_checkpoint(checkpoint: str | Path, env_cfg: EnvConfig, episodes: int, seed: int = 0) -> dict:
-    return evaluate_policy(load_greedy_policy(checkpoint), env_cfg, episodes, seed)
+    greedy = load_greedy_policy(checkpoint)
+    return evaluate_policy(lambda env: greedy, env_cfg, episodes, seed)
+
+
+def lka_response(make_policy: Callable[[gym.Env], Policy], e1: float = -0.4, e2: float = 0.2,
+                 centre_band_m: float = 0.05, steer_band_deg: float = 0.5) -> dict:
+    """The MATLAB example's response test: drive from (e1, e2) for one episode, greedily.
+
+    ``centred_after_s``: the first time after which |e1| <= ``centre_band_m`` for the rest of the
+    episode (None if never). ``steering_settled_after_s``: the first time after which the steering
+    stays within ``steer_band_deg`` of its final value (half a 1-degree action step: it no longer
+    changes). The MATLAB reference: centred within about 2.5 s, steering settled after about 2 s.
+    """
+    env = make_env(EnvConfig(scenario="lka"))
+    policy = make_policy(env)
+    try:
+        obs, info = env.reset(seed=0, options={"e1": e1, "e2": e2})
+        dt = float(getattr(env.unwrapped, "ts", 0.1))
+        times, lateral, yaw, steer = [0.0], [float(info["e1"])], [float(info["e2"])], [0.0]
+        done, total, terminated = False, 0.0, False
+        while not done:
+            obs, reward, terminated, truncated, info = env.step(int(policy(obs)))
+            total += float(reward)
+            done = terminated or truncated
+            times.append(times[-1] + dt)
+            lateral.append(float(info["e1"]))
+            yaw.append(float(info["e2"]))
+            steer.append(float(np.degrees(info["steering"])))
+    finally:
+        env.close()
+    lat, st = np.abs(np.asarray(lateral)), np.asarray(steer)
+
+    def settled_after(ok: np.ndarray) -> float | None:
+        if not ok[-1]:
+            return None
+        bad = np.flatnonzero(~ok)
+        return times[bad[-1] + 1] if len(bad) else 0.0
+
+    return {"e1_0": e1, "e2_0": e2, "return": total, "left_lane": bool(terminated),
+            "centred_after_s": settled_after(lat <= centre_band_m),
+            "steering_settled_after_s": settled_after(np.abs(st - st[-1]) <= steer_band_deg),
+            # Peak-to-peak steering over the last 5 s: a policy can centre the car while chattering.
+            "steering_chatter_deg": float(np.ptp(st[-int(round(5.0 / dt)):])),
+            "final_e1": lateral[-1], "final_e2": yaw[-1],
+            "trace": {"t": times, "e1": lateral, "e2": yaw, "steering_deg": steer}}
+
+
+def plot_lka_response(resp: dict, path: str | Path) -> Path:
+    """The MATLAB figure: lateral error, yaw error and steering over time."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    tr = resp["trace"]
+    fig, axes = plt.subplots(3, 1, figsize=(7, 7), sharex=True)
+    for ax, key, label in zip(axes, ("e1", "e2", "steering_deg"),
+                              ("lateral deviation e1 [m]", "relative yaw e2 [rad]", "steering [deg]")):
+        ax.plot(tr["t"], tr[key], lw=1.5)
+        ax.axhline(0.0, color="grey", lw=0.6)
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    axes[0].axhspan(-0.05, 0.05, color="tab:green", alpha=0.15, label="|e1| <= 5 cm")
+    if resp["centred_after_s"] is not None:
+        axes[0].axvline(resp["centred_after_s"], color="tab:green", ls="--",
+                        label=f"centred after {resp['centred_after_s']:.1f} s")
+    if resp["steering_settled_after_s"] is not None:
+        axes[2].axvline(resp["steering_settled_after_s"], color="tab:orange", ls="--",
+                        label=f"settled after {resp['steering_settled_after_s']:.1f} s")
+        axes[2].legend(loc="upper right")
+    axes[0].legend(loc="lower right")
+    axes[-1].set_xlabel("time [s]")
+    fig.suptitle(f"LKA response from e1 = {resp['e1_0']} m, e2 = {resp['e2_0']} rad")
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
 
 
 def format_result(r: dict) -> str:
@@ -82,4 +168,11 @@ def format_result(r: dict) -> str:
             f"length {r['length_mean']:.1f}, survival {r['survival_rate']:.0%}")
     if "achievement_rate" in r:
         text += f", achievement {r['achievement_rate']:.0%}"
+    resp = r.get("lka_response")
+    if resp:
+        fmt = lambda v: "never" if v is None else f"{v:.1f} s"  # noqa: E731
+        text += (f"\nLKA response from e1 = {resp['e1_0']} m, e2 = {resp['e2_0']} rad: |e1| <= 5 cm after "
+                 f"{fmt(resp['centred_after_s'])}, steering settled after {fmt(resp['steering_settled_after_s'])}"
+                 f" (chatter {resp['steering_chatter_deg']:.0f} deg peak to peak over the last 5 s; MATLAB: about "
+                 f"2.5 s and 2 s)")
     return text

@@ -1,0 +1,37 @@
+"""Evaluation: Wilson intervals, rates, and the MATLAB LKA response test."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from laneshift.config import EnvConfig
+from laneshift.evaluate import evaluate_policy, lka_response, plot_lka_response, wilson_ci95
+
+
+def test_wilson_interval_known_values():
+    lo, hi = wilson_ci95(50, 100)
+    assert (round(lo, 4), round(hi, 4)) == (0.4038, 0.5962)
+    assert wilson_ci95(0, 10)[0] == 0.0 and wilson_ci95(10, 10)[1] == pytest.approx(1.0)
+
+
+def test_lka_expert_response_meets_the_matlab_reference(tmp_path):
+    from laneshift.actors.envs.demonstrator import LKAExpert
+
+    resp = lka_response(LKAExpert)
+    assert resp["e1_0"] == -0.4 and resp["trace"]["e1"][0] == pytest.approx(-0.4)
+    assert not resp["left_lane"] and resp["centred_after_s"] is not None and resp["centred_after_s"] <= 2.5
+    t = np.asarray(resp["trace"]["t"])
+    after = np.asarray(resp["trace"]["e1"])[t >= resp["centred_after_s"]]
+    assert np.abs(after).max() <= 0.05  # the definition: centred for the rest of the episode
+    png = plot_lka_response(resp, tmp_path / "resp.png")
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_keep_lane_policy_on_straight_never_achieves_from_a_non_target_lane():
+    from laneshift.actors.envs.demonstrator import KeepLaneDriver
+
+    cfg = EnvConfig(scenario="straight", initial_lane="non-target")
+    result = evaluate_policy(KeepLaneDriver, cfg, episodes=3, seed=0)
+    assert result["achievement_rate"] == 0.0
+    assert 0.0 <= result["achievement_ci95"][0] <= result["achievement_ci95"][1] <= 1.0
