@@ -24,6 +24,9 @@ def test_lka_expert_response_meets_the_matlab_reference(tmp_path):
     t = np.asarray(resp["trace"]["t"])
     after = np.asarray(resp["trace"]["e1"])[t >= resp["centred_after_s"]]
     assert np.abs(after).max() <= 0.05  # the definition: centred for the rest of the episode
+    # The expert's steering ends alternating between neighbouring 1-degree actions: settled.
+    assert resp["steering_settled_after_s"] is not None and resp["steering_settled_after_s"] <= 2.5
+    assert resp["steering_chatter_deg"] <= 1.0
     png = plot_lka_response(resp, tmp_path / "resp.png")
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
