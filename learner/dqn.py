@@ -47,7 +47,8 @@ class DoubleDQN:
         weight = torch.as_tensor(batch.get("weight", np.ones(len(reward), np.float32)), dtype=torch.float32)
 
         # Q(s, a) of the actions taken.
-        q = self.online(obs).gather(1, action[:, None]).squeeze(1)
+        q_all = self.online(obs)
+        q = q_all.gather(1, action[:, None]).squeeze(1)
         with torch.no_grad():
             # Double DQN: the online net picks the next action, the target net values it.
             chooser = self.online if self.cfg.double else self.target
@@ -56,6 +57,16 @@ class DoubleDQN:
             td_target = reward + self.cfg.gamma * not_done * next_q
         td_error = q - td_target
         loss = (weight * F.huber_loss(q, td_target, reduction="none", delta=self.cfg.huber_delta)).mean()
+        margin_loss = torch.zeros(())
+        if self.cfg.margin_loss_weight > 0 and "is_demo" in batch:
+            # DQfD: on demo rows the demonstrator's action must beat every other by `margin`.
+            demo = torch.as_tensor(batch["is_demo"], dtype=torch.bool)
+            if demo.any():
+                qd = q_all[demo]
+                penalty = torch.full_like(qd, self.cfg.margin)
+                penalty.scatter_(1, action[demo][:, None], 0.0)
+                margin_loss = ((qd + penalty).max(dim=1).values - q[demo]).mean()
+                loss = loss + self.cfg.margin_loss_weight * margin_loss
 
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
@@ -68,7 +79,7 @@ class DoubleDQN:
         # Per-item |TD error|: the new priorities when the replay samples by priority.
         self.last_td_abs = td_error.detach().abs().numpy()
         return {"loss": float(loss.detach()), "q_mean": float(q.detach().mean()), "grad_norm": float(grad_norm),
-                "td_abs": float(self.last_td_abs.mean())}
+                "td_abs": float(self.last_td_abs.mean()), "margin_loss": float(margin_loss.detach())}
 
     @torch.no_grad()
     def greedy(self, obs: np.ndarray) -> np.ndarray:

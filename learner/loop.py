@@ -233,7 +233,7 @@ class Learner:
 
 def _split(batch: wire.SampledBatch) -> list[dict[str, np.ndarray]]:
     parts = {k: np.split(getattr(batch, k), batch.num_batches)
-             for k in ("obs", "action", "reward", "next_obs", "terminated", "weight")}
+             for k in ("obs", "action", "reward", "next_obs", "terminated", "weight", "is_demo")}
     return [{k: v[i] for k, v in parts.items()} for i in range(batch.num_batches)]
 
 

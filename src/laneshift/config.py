@@ -178,6 +178,10 @@ class LearnerConfig:
     grad_clip: float = 10.0  # global-norm gradient clipping (MATLAB threshold: 1)
     weight_decay: float = 0.0  # L2 regularisation (MATLAB: 1e-4)
     double: bool = True  # Double DQN target; False = vanilla DQN (for comparison)
+    # DQfD (Hester et al. 2018) large-margin loss on demo rows: lambda * (max_a [Q(s,a) + m 1{a != a_E}]
+    # - Q(s,a_E)), pushing the demonstrator's action above the others by a margin. 0 = off.
+    margin_loss_weight: float = 0.0
+    margin: float = 0.8
     publish_every: int = 50  # updates between weight broadcasts (async)
     updates_per_round: int = 8  # sync: updates per round of worker batches
     phase1_updates: int = 2_000  # rehearsal: demo-only updates before phase 2
@@ -199,6 +203,8 @@ class LearnerConfig:
         _check(self.huber_delta > 0, "learner.huber_delta", "must be > 0", self.huber_delta)
         _check(self.grad_clip > 0, "learner.grad_clip", "must be > 0", self.grad_clip)
         _check(self.weight_decay >= 0, "learner.weight_decay", "must be >= 0", self.weight_decay)
+        _check(self.margin_loss_weight >= 0, "learner.margin_loss_weight", "must be >= 0", self.margin_loss_weight)
+        _check(self.margin >= 0, "learner.margin", "must be >= 0", self.margin)
         _check(self.seed >= 0, "learner.seed", "must be >= 0", self.seed)
 
 
