@@ -16,6 +16,7 @@ step is ever taken with stale weights; in ``async`` mode it takes the newest ver
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 from typing import Protocol
@@ -109,7 +110,10 @@ class EnvWorker:
         # Rehearsal: phase 1 learns from demos alone, so workers start with the phase-2 network.
         if not self._await_weights(links, -1, phase=2 if self.rehearsal else None):
             return self._summary(0, 0, 0, [], started)
-        epsilon = make_schedule(self.cfg, self.index, budget=env_steps)
+        cfg = self.cfg
+        if self.rehearsal and cfg.phase2_epsilon_start >= 0:  # workers act only in phase 2
+            cfg = dataclasses.replace(cfg, epsilon_start=cfg.phase2_epsilon_start)
+        epsilon = make_schedule(cfg, self.index, budget=env_steps)
         n_envs = len(self.envs)
         obs = np.stack([env.reset(seed=self.cfg.seed + 1000 * self.index + j)[0] for j, env in enumerate(self.envs)])
         ep_return, ep_len = np.zeros(n_envs), np.zeros(n_envs, np.int64)

@@ -40,10 +40,23 @@ def free_tcp_port() -> int:
         return s.getsockname()[1]
 
 
-def default_demo_dir(cfg: RunConfig) -> Path:
-    """Where the default scripted demo shard for this scenario lives (shared by runs)."""
+def _default_demo_episodes(cfg: RunConfig) -> int:
+    """Scripted episodes for the default shard: enough for retention's demo region (or 2,000
+    transitions for rehearsal), at least 20."""
+    from laneshift.envspec import make_env
+
+    need = cfg.replay.capacity * cfg.replay.demo_ratio if cfg.replay.demo_mode == "retention" else 2_000
+    probe = make_env(cfg.env)
+    horizon = getattr(probe.unwrapped, "max_steps", None) or 100
+    probe.close()
+    return max(20, math.ceil(1.3 * need / horizon))
+
+
+def default_demo_dir(cfg: RunConfig, episodes: int) -> Path:
+    """Where the default scripted shard lives (shared by runs; its size is in the name, so a run
+    that needs more demos gets a larger shard instead of a refusal)."""
     env = cfg.env
-    name = f"{env.scenario.replace('/', '_')}-{env.observation}-p{env.reward_preset}-scripted"
+    name = f"{env.scenario.replace('/', '_')}-{env.observation}-p{env.reward_preset}-scripted-{episodes}ep"
     return Path(cfg.train.run_dir).resolve().parent / "demos" / name
 
 
@@ -51,17 +64,11 @@ def ensure_demo_shard(cfg: RunConfig, out: TextIO) -> RunConfig:
     """Demo modes without a shard get the scripted demonstrator's, generated once if absent."""
     if cfg.replay.demo_mode == "none" or cfg.replay.demo_paths:
         return cfg
-    path = default_demo_dir(cfg)
-    need = cfg.replay.capacity * cfg.replay.demo_ratio if cfg.replay.demo_mode == "retention" else 2_000
-    if not (path / "metadata.json").exists() and not any(path.glob("**/metadata.json")):
+    episodes = _default_demo_episodes(cfg)
+    path = default_demo_dir(cfg, episodes)
+    if not any(path.glob("**/metadata.json")):
         from laneshift.demos.generate import generate_shard
-        from laneshift.envspec import make_env
 
-        probe = make_env(cfg.env)
-        horizon = probe.spec.max_episode_steps if probe.spec and probe.spec.max_episode_steps else 100
-        horizon = getattr(probe.unwrapped, "max_steps", None) or horizon
-        probe.close()
-        episodes = max(20, math.ceil(1.3 * need / horizon))
         print(f"train: generating the default demo shard ({episodes} scripted episodes) in {path}", file=out, flush=True)
         generate_shard(path, env_id_or_scenario=cfg.env.scenario, env_kwargs=cfg.env.env_kwargs(),
                        episodes=episodes, seed=cfg.train.seed + 10_000)

@@ -173,6 +173,10 @@ def build_parser() -> argparse.ArgumentParser:
     from laneshift.demos.cli import register as register_demos
 
     register_demos(demos.add_subparsers(dest="demos_cmd", required=True, metavar="ACTION"))
+    experiment = sub.add_parser("experiment", help="reproducible experiments (the paper's Table 2 comparison)")
+    from laneshift.experiments import register as register_experiments
+
+    register_experiments(experiment.add_subparsers(dest="experiment_cmd", required=True, metavar="WHICH"))
     bench = sub.add_parser("bench", help="benchmarks (env speed, replay throughput)")
     bench_sub = bench.add_subparsers(dest="bench_cmd", required=True, metavar="WHAT")
     from laneshift.bench_env import register as register_bench_env

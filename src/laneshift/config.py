@@ -92,6 +92,9 @@ class ActorConfig:
     epsilon_final: float = 0.1  # paper condition 5: 1.0 -> 0.1
     epsilon_decay_steps: int = 0  # linear: a worker's env steps from start to final; 0 = half its budget
     epsilon_decay_rate: float = 1e-4  # exponential: eps *= (1 - rate) per step (MATLAB EpsilonDecay)
+    # Rehearsal phase 2 is "a new training run" (paper): exploration restarts at epsilon_start.
+    # A value >= 0 starts phase 2 there instead, to keep more of what phase 1 learned.
+    phase2_epsilon_start: float = -1.0
     apex_epsilon: float = 0.4  # apex: eps_i = apex_epsilon ** (1 + apex_alpha * i / (N - 1))
     apex_alpha: float = 7.0
     torch_threads: int = 1
@@ -103,6 +106,9 @@ class ActorConfig:
         _check(self.send_every >= 1, "actor.send_every", "must be >= 1", self.send_every)
         _check(self.exploration in ("linear", "exponential", "apex"), "actor.exploration",
                "must be linear, exponential or apex", self.exploration)
+        _check(self.phase2_epsilon_start == -1.0 or 0.0 <= self.phase2_epsilon_start <= 1.0,
+               "actor.phase2_epsilon_start", "must be -1 (restart at epsilon_start) or in [0, 1]",
+               self.phase2_epsilon_start)
         for name in ("epsilon_start", "epsilon_final", "apex_epsilon"):
             v = getattr(self, name)
             _check(0.0 <= v <= 1.0, f"actor.{name}", "must be in [0, 1]", v)

@@ -1,0 +1,197 @@
+"""``laneshift experiment compare``: the paper's Table 2 comparison, reproducibly.
+
+Every method is trained with the same budget and seeds through the real local system (Ray
+workers, zenoh, replay-server and learner processes), then its final network is evaluated
+greedily from both initial-lane settings; the baseline drivers are evaluated on the same episode
+seeds. Rates are pooled over seeds (Wilson 95 % intervals over all evaluation episodes).
+
+    laneshift experiment compare --scenario straight --methods none,retention,rehearsal,dqfd \\
+        --seeds 0,1,2 --env-steps 150000 --eval-episodes 200 --out runs/exp-table2
+
+Methods: ``none``, ``retention``, ``rehearsal`` (the paper), ``dqfd`` (beyond the paper: retention
+plus DQfD's large-margin loss on demo rows). Writes ``results.json``, ``table.md`` and
+``curves_episodes.png`` / ``curves_wallclock.png`` (moving-average return and episode length).
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .config import EnvConfig, RunConfig, load_run_config
+from .evaluate import evaluate_policy, load_greedy_policy, wilson_ci95
+
+METHODS: dict[str, dict[str, Any]] = {
+    "none": {"replay.demo_mode": "none"},
+    "retention": {"replay.demo_mode": "retention"},
+    "rehearsal": {"replay.demo_mode": "rehearsal"},
+    "dqfd": {"replay.demo_mode": "retention", "learner.margin_loss_weight": 1.0},
+}
+INITIAL_LANES = ("random", "non-target")
+
+
+def method_config(base: RunConfig, method: str, seed: int, run_dir: Path, env_steps: int) -> RunConfig:
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r} (known: {', '.join(METHODS)})")
+    overrides = {**METHODS[method], "train.run_dir": str(run_dir), "train.env_steps": env_steps,
+                 "train.eval_episodes": 0, "train.seed": seed, "actor.seed": seed, "learner.seed": seed,
+                 "replay.seed": seed, "transport.run_id": f"{method}-s{seed}"}
+    return load_run_config(overrides=overrides, base=base)
+
+
+def evaluate_both_lanes(make_policy, env: EnvConfig, episodes: int, seed: int, max_steps: int) -> dict:
+    out = {}
+    for lane in INITIAL_LANES:
+        cfg = EnvConfig(**{**env.__dict__, "initial_lane": lane, "max_steps": max_steps})
+        out[lane] = evaluate_policy(make_policy, cfg, episodes, seed)
+    return out
+
+
+def pooled(evals: list[dict], key: str) -> dict:
+    n = sum(e["episodes"] for e in evals)
+    k = round(sum(e[key] * e["episodes"] for e in evals))
+    lo, hi = wilson_ci95(k, n)
+    return {"rate": k / n if n else 0.0, "ci95": [lo, hi], "episodes": n}
+
+
+def run_compare(args: argparse.Namespace) -> dict:
+    from .deploy.local import train_local
+
+    out_dir = Path(args.out).resolve()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    base = load_run_config(args.config, {"env.scenario": args.scenario, "actor.workers": args.workers,
+                                         **dict(kv.split("=", 1) for kv in args.set)})
+    methods = [m for m in args.methods.split(",") if m]
+    seeds = [int(s) for s in args.seeds.split(",") if s]
+    results: dict[str, Any] = {"scenario": args.scenario, "env_steps": args.env_steps, "seeds": seeds,
+                               "eval_episodes": args.eval_episodes, "eval_max_steps": args.eval_max_steps,
+                               "methods": {}, "baselines": {}}
+    eval_seed = 100_000  # the same evaluation episodes for every method and baseline
+    for method in methods:
+        runs = []
+        for seed in seeds:
+            run_dir = out_dir / f"{method}-s{seed}"
+            cfg = method_config(base, method, seed, run_dir, args.env_steps)
+            started = time.monotonic()
+            log = io.StringIO()
+            rc = train_local(cfg, out=log)
+            (out_dir / f"{method}-s{seed}.log").write_text(log.getvalue())
+            if rc != 0:
+                raise RuntimeError(f"{method} seed {seed} failed (rc {rc}); see {out_dir / f'{method}-s{seed}.log'}")
+            greedy = load_greedy_policy(run_dir / "checkpoints" / "final.safetensors")
+            evals = evaluate_both_lanes(lambda env: greedy, cfg.env, args.eval_episodes, eval_seed,
+                                        args.eval_max_steps)
+            runs.append({"seed": seed, "run_dir": str(run_dir), "wall_s": round(time.monotonic() - started, 1),
+                         "eval": evals})
+            print(f"experiment: {method} seed {seed}: " + ", ".join(
+                f"{lane} survival {e['survival_rate']:.0%} achievement {e['achievement_rate']:.0%}"
+                for lane, e in evals.items()), flush=True)
+        results["methods"][method] = {"runs": runs, **{
+            lane: {"survival": pooled([r["eval"][lane] for r in runs], "survival_rate"),
+                   "achievement": pooled([r["eval"][lane] for r in runs], "achievement_rate")}
+            for lane in INITIAL_LANES}}
+    if args.baselines:
+        from laneshift.actors.envs.demonstrator import KeepLaneDriver, ScriptedDriver
+
+        drivers = {"random": lambda env: (lambda obs: env.action_space.sample()), "keep-lane": KeepLaneDriver,
+                   "scripted": ScriptedDriver}
+        n_base = args.eval_episodes * len(seeds)
+        for name, make in drivers.items():
+            evals = evaluate_both_lanes(make, base.env, n_base, eval_seed, args.eval_max_steps)
+            results["baselines"][name] = {lane: {"survival": pooled([e], "survival_rate"),
+                                                 "achievement": pooled([e], "achievement_rate")}
+                                          for lane, e in evals.items()}
+    (out_dir / "results.json").write_text(json.dumps(results, indent=2))
+    (out_dir / "table.md").write_text(render_table(results))
+    plot_curves(results, out_dir)
+    print(render_table(results))
+    return results
+
+
+def render_table(results: dict) -> str:
+    lines = [f"{results['scenario']}: {results['env_steps']:,} env steps per run, seeds {results['seeds']}, "
+             f"{results['eval_max_steps']}-step greedy evaluation episodes "
+             f"({results['eval_episodes']} per seed and initial lane; rates pooled, Wilson 95 % CI)", "",
+             "| method | initial lane | survival | achievement |", "|---|---|---|---|"]
+    rows = [(m, r) for m, r in results["methods"].items()] + [(f"{b} (baseline)", r)
+                                                              for b, r in results["baselines"].items()]
+    for name, r in rows:
+        for lane in INITIAL_LANES:
+            s, a = r[lane]["survival"], r[lane]["achievement"]
+            lines.append(f"| {name} | {lane} | {s['rate']:.0%} [{s['ci95'][0]:.0%}, {s['ci95'][1]:.0%}] | "
+                         f"{a['rate']:.0%} [{a['ci95'][0]:.0%}, {a['ci95'][1]:.0%}] |")
+    return "\n".join(lines) + "\n"
+
+
+def _episode_curves(run_dir: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(wall-clock s, return, length) of every episode, in arrival order."""
+    t, ret, length = [], [], []
+    with open(Path(run_dir) / "metrics.jsonl") as f:
+        for line in f:
+            rec = json.loads(line)
+            if rec.get("kind") == "episode":
+                t.append(rec["time"])
+                ret.append(rec["return"])
+                length.append(rec["length"])
+    t_arr = np.asarray(t)
+    return (t_arr - t_arr[0] if len(t_arr) else t_arr), np.asarray(ret), np.asarray(length)
+
+
+def _moving_average(x: np.ndarray, window: int) -> np.ndarray:
+    if len(x) < window:
+        return np.cumsum(x) / np.arange(1, len(x) + 1)
+    return np.convolve(x, np.ones(window) / window, mode="valid")
+
+
+def plot_curves(results: dict, out_dir: Path, window: int = 100) -> None:
+    """Like the paper's figs 4/5: moving-average return and episode length, vs episodes and time."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    for axis in ("episodes", "wallclock"):
+        fig, (ax_r, ax_l) = plt.subplots(2, 1, figsize=(8, 7), sharex=True)
+        for method, r in results["methods"].items():
+            for i, run in enumerate(r["runs"]):
+                t, ret, length = _episode_curves(run["run_dir"])
+                if len(ret) == 0:
+                    continue
+                ma_r, ma_l = _moving_average(ret, window), _moving_average(length.astype(float), window)
+                x = np.arange(len(ret))[-len(ma_r):] if axis == "episodes" else t[-len(ma_r):]
+                kw = {"color": f"C{list(results['methods']).index(method)}", "alpha": 0.8, "lw": 1.2,
+                      "label": method if i == 0 else None}
+                ax_r.plot(x, ma_r, **kw)
+                ax_l.plot(x, ma_l, **kw)
+        ax_r.set_ylabel(f"return ({window}-episode mean)")
+        ax_l.set_ylabel("episode length (steps)")
+        ax_l.set_xlabel("episodes" if axis == "episodes" else "wall-clock seconds")
+        ax_r.legend()
+        for ax in (ax_r, ax_l):
+            ax.grid(alpha=0.3)
+        fig.suptitle(f"{results['scenario']}: learning curves ({len(results['seeds'])} seeds, one line per run)")
+        fig.tight_layout()
+        fig.savefig(out_dir / f"curves_{axis}.png", dpi=100)
+        plt.close(fig)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("compare", help="train and evaluate methods x seeds (the paper's Table 2)")
+    p.add_argument("--scenario", default="straight")
+    p.add_argument("--methods", default="none,retention,rehearsal,dqfd", help=f"comma separated: {', '.join(METHODS)}")
+    p.add_argument("--seeds", default="0,1,2")
+    p.add_argument("--env-steps", type=int, default=150_000)
+    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--eval-episodes", type=int, default=200, help="per seed and initial lane")
+    p.add_argument("--eval-max-steps", type=int, default=300, help="evaluation episode length (paper: 300)")
+    p.add_argument("--no-baselines", dest="baselines", action="store_false")
+    p.add_argument("--out", default="runs/experiment")
+    p.add_argument("--config", help="base config file (YAML/TOML/JSON)")
+    p.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE")
+    p.set_defaults(func=lambda a: (run_compare(a), 0)[1])
