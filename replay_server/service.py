@@ -48,11 +48,12 @@ class ReplayService:
     def start(self) -> "ReplayService":
         sub = self.ingest_session.declare_subscriber(wire.transitions_wildcard(self.run_id),
                                                      zenoh.handlers.FifoChannel(1024))
-        ingest = threading.Thread(target=self._ingest_loop, args=(sub,), name="replay-ingest", daemon=True)
+        ingest = threading.Thread(target=self._drain, args=(sub, self._ingest), name="replay-ingest", daemon=True)
         ingest.start()
         self._threads.append(ingest)
         prio_sub = self.session.declare_subscriber(wire.priorities_key(self.run_id), zenoh.handlers.FifoChannel(256))
-        prio = threading.Thread(target=self._priorities_loop, args=(prio_sub,), name="replay-priorities", daemon=True)
+        prio = threading.Thread(target=self._drain, name="replay-priorities", daemon=True,
+                                args=(prio_sub, lambda sample: self.core.handle_priorities(sample.payload.to_bytes())))
         prio.start()
         self._threads.append(prio)
         if self.checkpoint_dir is not None and self.checkpoint_every_s > 0:
@@ -71,29 +72,25 @@ class ReplayService:
         ]
         return self
 
-    def _ingest_loop(self, sub: zenoh.Subscriber) -> None:
+    def _drain(self, sub: zenoh.Subscriber, handle) -> None:
+        """Feed every sample of ``sub`` to ``handle`` until stopped; a handler bug costs one message."""
         while not self.stop_event.is_set():
             try:
                 sample = sub.recv()
             except Exception:  # noqa: BLE001 - channel closed with the session
                 return
             try:
-                actor = wire.actor_from_transitions_key(str(sample.key_expr))
-            except ValueError:
-                self.core._reject("bad_key")
-                continue
-            try:
-                self.core.ingest(sample.payload.to_bytes(), actor)
-            except Exception:  # noqa: BLE001 - a bug must cost one message, never the ingest thread
+                handle(sample)
+            except Exception:  # noqa: BLE001 - never let one message stop the thread
                 self.core._reject("internal_error")
 
-    def _priorities_loop(self, sub: zenoh.Subscriber) -> None:
-        while not self.stop_event.is_set():
-            try:
-                sample = sub.recv()
-            except Exception:  # noqa: BLE001 - channel closed with the session
-                return
-            self.core.handle_priorities(sample.payload.to_bytes())  # never raises; refusals are counted
+    def _ingest(self, sample: zenoh.Sample) -> None:
+        try:
+            actor = wire.actor_from_transitions_key(str(sample.key_expr))
+        except ValueError:
+            self.core._reject("bad_key")
+            return
+        self.core.ingest(sample.payload.to_bytes(), actor)
 
     def _flow_loop(self, period_s: float = 0.01, heartbeat_s: float = 0.25) -> None:
         """Tell actors whether they may insert: on every change, and as a heartbeat."""
