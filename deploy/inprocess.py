@@ -104,6 +104,9 @@ class InProcessLearnerLinks:
     def stop_requested(self) -> bool:
         return False  # stopped through the shared event
 
+    def stop_all(self) -> None:
+        self.board.stop.set()
+
 
 def train_inprocess(cfg: RunConfig) -> dict:
     """Run workers and learner as threads until the env-step budget is spent; returns a summary."""

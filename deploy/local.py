@@ -253,6 +253,9 @@ def _summary(cfg: RunConfig, run_dir: Path, summaries: list[dict], last: dict, w
         f"{cfg.train.parallel}, {cfg.actor.workers} workers",
         f"env steps       {steps:,} in {wall:.0f} s ({steps / max(wall, 1e-6):.0f} steps/s overall), {episodes} episodes",
         f"learner         {last.get('updates', 0):,} updates, final weights version {last.get('version', 0)}",
+        *([f"stopped early   episode {last['stop_reason']['episode']} returned {last['stop_reason']['return']:.3f}"
+           f" >= train.stop_return {cfg.train.stop_return} after {last['stop_reason']['elapsed_s']} s"]
+          if last.get("stop_reason") else []),
         f"last 100 eps    return {_fmt(last.get('return_mean'))}, length {_fmt(last.get('length_mean'))}, "
         f"crash rate {_fmt(last.get('crash_rate'))}",
     ]

@@ -28,6 +28,7 @@ class LearnerLinks(Protocol):
     def publish_stats(self, payload: bytes) -> None: ...
     def take_episodes(self) -> list[bytes]: ...
     def stop_requested(self) -> bool: ...
+    def stop_all(self) -> None: ...
 
 
 class ZenohLearnerLinks:
@@ -83,3 +84,7 @@ class ZenohLearnerLinks:
 
     def stop_requested(self) -> bool:
         return self._stop.requested()
+
+    def stop_all(self) -> None:
+        """Broadcast the run-wide stop (actors and this learner end their loops)."""
+        self.session.put(wire.control_key(self.run_id), wire.encode_json({"cmd": "stop"}))

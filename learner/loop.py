@@ -59,6 +59,7 @@ class Learner:
         self.actor_steps: dict[str, int] = {}
         self.last_update: dict[str, float] = {}
         self.replay_stats: dict = {}
+        self.stop_reason: dict | None = None
         self.started = time.monotonic()
         self._updates_at_last_log, self._steps_at_last_log, self._time_at_last_log = 0, 0, time.monotonic()
 
@@ -184,6 +185,14 @@ class Learner:
             except (wire.WireError, KeyError, TypeError, ValueError):
                 continue
             self.episodes += 1
+            if ret >= self.cfg.train.stop_return and self.stop_reason is None:
+                # MATLAB's stop criterion: an episode reached the target return.
+                self.stop_reason = {"criterion": "stop_return", "return": ret, "episode": self.episodes,
+                                    "elapsed_s": round(time.monotonic() - self.started, 1),
+                                    "env_steps": sum(self.actor_steps.values())}
+                print(f"learner: episode {self.episodes} returned {ret:.3f} >= train.stop_return "
+                      f"{self.cfg.train.stop_return}: stopping the run", flush=True)
+                self.links.stop_all()
             self.returns.append(ret)
             self.lengths.append(length)
             self.crashes.append(float(bool(ep.get("crashed", False))))
@@ -213,7 +222,7 @@ class Learner:
             "replay_size": self.replay_stats.get("tables", {}).get("online", {}).get("size"),
             "demo_share_samples": self.replay_stats.get("demo_share_recent_samples"),
             "version_lag": {a: self.version - int(s.get("last_version", 0)) for a, s in actors.items()},
-            "elapsed_s": round(now - self.started, 1),
+            "elapsed_s": round(now - self.started, 1), "stop_reason": self.stop_reason,
         }
 
     def _log(self) -> None:

@@ -41,3 +41,13 @@ def test_prioritized_replay_gets_priorities_from_the_learner(tmp_path):
     assert sampler["priority_updates"] == result["replay"]["requests"]["served"] > 0
     assert result["replay"]["rejected"] == {}
     assert sampler["max_priority"] > 0
+
+
+def test_stop_return_ends_the_run_at_the_first_episode_that_reaches_it(tmp_path):
+    # LKA returns are <= 0: a threshold of -1e9 is met by the very first episode.
+    cfg = load_run_config(overrides={**FAST, "train.env_steps": 100_000, "train.stop_return": -1e9,
+                                     "train.run_dir": str(tmp_path)})
+    result = train_inprocess(cfg)
+    reason = result["learner"]["stop_reason"]
+    assert reason["criterion"] == "stop_return" and reason["episode"] == 1
+    assert sum(w["env_steps"] for w in result["workers"]) < 100_000  # stopped long before the budget

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import tomllib
 import typing
 from dataclasses import dataclass, field
@@ -240,6 +241,8 @@ class TrainConfig:
     run_dir: str = "runs/latest"
     log_every_s: float = 2.0
     eval_episodes: int = 10  # greedy episodes in the final summary (0 = skip)
+    # MATLAB's stop criterion: end the run as soon as an episode's return reaches this (inf = never).
+    stop_return: float = math.inf
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -247,6 +250,8 @@ class TrainConfig:
         _check(self.parallel in ("async", "sync"), "train.parallel", "must be async or sync", self.parallel)
         _check(self.log_every_s > 0, "train.log_every_s", "must be > 0", self.log_every_s)
         _check(self.eval_episodes >= 0, "train.eval_episodes", "must be >= 0", self.eval_episodes)
+        _check(not math.isnan(self.stop_return), "train.stop_return", "must be a number (inf = never)",
+               self.stop_return)
         _check(self.seed >= 0, "train.seed", "must be >= 0", self.seed)
 
 
