@@ -215,8 +215,6 @@ def test_sigint_leaves_no_process_behind(tmp_path):
 def test_replay_server_killed_mid_run_is_restarted_and_the_run_completes(tmp_path):
     """kill -9 of the replay server: the launcher restarts it, it restores its checkpoint, actors
     and learner carry on through the router, and what was in flight is counted, not hidden."""
-    import threading
-
     from laneshift.deploy import local
 
     killed = {}
