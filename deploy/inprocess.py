@@ -19,7 +19,7 @@ from laneshift import wire
 from laneshift.actors.worker import EnvWorker
 from laneshift.config import RunConfig
 from laneshift.envspec import env_spec
-from laneshift.learner.loop import Learner, worker_names
+from laneshift.learner.loop import Learner, worker_budgets, worker_names
 from laneshift.replay_server.core import ReplayCore
 from laneshift.replay_server.service import build_core
 
@@ -117,7 +117,7 @@ def train_inprocess(cfg: RunConfig) -> dict:
     learner_thread = threading.Thread(target=learner.run, name="learner", daemon=True)
     learner_thread.start()
     names = worker_names(cfg.actor.workers)
-    share = [cfg.train.env_steps // len(names) + (i < cfg.train.env_steps % len(names)) for i in range(len(names))]
+    share = worker_budgets(cfg.train.env_steps, len(names))
     summaries: dict[str, dict] = {}
 
     def work(i: int, name: str) -> None:

@@ -29,7 +29,7 @@ from typing import TextIO
 
 from laneshift import transport, wire
 from laneshift.config import RunConfig, save_run_config
-from laneshift.learner.loop import worker_names
+from laneshift.learner.loop import worker_budgets, worker_names
 
 from .processes import ChildFailed, ProcessGroup, wait_for_file
 
@@ -189,7 +189,7 @@ def train_local(cfg: RunConfig, out: TextIO = sys.stdout, ray_address: str | Non
         plain = cfg.to_dict()
         workers = [RayEnvWorker.options(name=f"{cfg.transport.run_id}-{n}").remote(n, i, plain)
                    for i, n in enumerate(names)]
-        share = [cfg.train.env_steps // len(names) + (i < cfg.train.env_steps % len(names)) for i in range(len(names))]
+        share = worker_budgets(cfg.train.env_steps, len(names))
         pending = [w.run.remote(s) for w, s in zip(workers, share)]
         done: list = []
         while pending:

@@ -40,6 +40,11 @@ def worker_names(n: int) -> list[str]:
     return [f"w{i}" for i in range(n)]
 
 
+def worker_budgets(total: int, n: int) -> list[int]:
+    """The run's env-step budget split over ``n`` workers (the first ones take the remainder)."""
+    return [total // n + (i < total % n) for i in range(n)]
+
+
 class Learner:
     def __init__(self, cfg: RunConfig, spec: EnvSpec, links: LearnerLinks, stop: threading.Event):
         self.cfg, self.lcfg, self.spec = cfg, cfg.learner, spec
@@ -121,9 +126,13 @@ class Learner:
         result = self.links.sample(req)
         if isinstance(result, wire.SampledBatch):
             return result
+        self._back_off(result)
+        return None
+
+    def _back_off(self, result: wire.WireError | None) -> None:
+        """Wait as long as the replay server asked (``retry_after_ms``), or 0.1 s if it did not answer."""
         delay = getattr(result, "retry_after_ms", 0) / 1000 if result is not None else 0.1
         self.stop.wait(max(delay, 0.001))
-        return None
 
     def _rehearsal_phase1(self) -> None:
         print(f"learner: rehearsal phase 1: {self.lcfg.phase1_updates} updates on demos only", flush=True)
@@ -166,8 +175,7 @@ class Learner:
         if isinstance(result, wire.WireError) and result.reason == "rate_limited":
             pass  # ... before the replay holds enough to learn, the round just advances the version
         elif not isinstance(result, wire.SampledBatch):
-            delay = getattr(result, "retry_after_ms", 0) / 1000 if result is not None else 0.1
-            self.stop.wait(max(delay, 0.001))
+            self._back_off(result)
             return
         else:
             self._updates(result)

@@ -60,10 +60,10 @@ def write_checkpoint(core: "ReplayCore", directory: str | Path) -> dict:
                 "n_actions": core.schema.n_actions, "capacity": table.capacity, "inserted": table.inserted,
                 "actors": {k: dict(v) for k, v in core.actors.items()}, "actor_index": dict(core._actor_index),
                 "phase": core.phase, "mode": core.mode, "time": time.time()}
+    items = int((cols["key"] >= 0).sum())  # from the copy in hand, not a second read of the file
     for col in cols.values():
         col.flush()
     del cols
-    items = int((np.load(tmp / "key.npy", mmap_mode="r") >= 0).sum())
     meta["items"] = items
     (tmp / "meta.json").write_text(json.dumps(meta))
     old = directory.with_name(directory.name + ".old")
