@@ -81,19 +81,17 @@ def _road_lines(n: int) -> list[tuple[str, str]]:
     return [("solid" if i == 0 else "dashed", "solid" if i == n - 1 else "none") for i in range(n)]
 
 
+def _plain_road(name: str, paths: list) -> Layout:
+    """A road of parallel lanes with traffic and spawns on every lane; lane 0 is the target."""
+    n = len(paths)
+    return Layout(name=name, paths=paths, npc_lanes=list(range(n)), spawn_lanes=list(range(n)),
+                  default_target=0, start_s=[150.0] * n, lines=_road_lines(n))
+
+
 def straight(lanes_count: int = 3, length: float = 3000.0) -> Layout:
     """Fig. 3(a): a straight multi-lane road."""
     ref = LanePath((0.0, 0.0), 0.0, [(length, 0.0)], width=LANE_WIDTH)
-    paths = _parallel(ref, lanes_count, 0)
-    return Layout(
-        name="straight",
-        paths=paths,
-        npc_lanes=list(range(lanes_count)),
-        spawn_lanes=list(range(lanes_count)),
-        default_target=0,
-        start_s=[150.0] * lanes_count,
-        lines=_road_lines(lanes_count),
-    )
+    return _plain_road("straight", _parallel(ref, lanes_count, 0))
 
 
 def merge(lanes_count: int = 2, length: float = 3000.0) -> Layout:
@@ -143,16 +141,7 @@ def curve(lanes_count: int = 3, sections: int = 12) -> Layout:
         segs.append((ang / abs(kk), kk))
         segs.append((40.0, 0.0))
     ref = LanePath((0.0, 0.0), 0.0, segs, width=LANE_WIDTH)
-    paths = _parallel(ref, lanes_count, (lanes_count - 1) / 2)
-    return Layout(
-        name="curve",
-        paths=paths,
-        npc_lanes=list(range(lanes_count)),
-        spawn_lanes=list(range(lanes_count)),
-        default_target=0,
-        start_s=[150.0] * lanes_count,
-        lines=_road_lines(lanes_count),
-    )
+    return _plain_road("curve", _parallel(ref, lanes_count, (lanes_count - 1) / 2))
 
 
 def roundabout(lanes_count: int = 3, radius: float = 150.0) -> Layout:
