@@ -10,7 +10,8 @@ over zenoh (``ZenohActorLinks``) and in-process in unit tests (``laneshift.deplo
 - ``links.stop_requested() -> bool``.
 
 Every ``send_every`` env steps it publishes one transitions batch (MATLAB: "workers send their
-experience every N steps"). In ``sync`` mode it then waits for the next weights version, so no
+experience every N steps"). With ``n_step > 1`` the batch holds n-step items (laneshift.nstep),
+each sent once its n rewards are known, so a batch can hold up to n - 1 items fewer or more. In ``sync`` mode it then waits for the next weights version, so no
 step is ever taken with stale weights; in ``async`` mode it takes the newest version if one came.
 """
 
@@ -28,6 +29,7 @@ from laneshift import wire
 from laneshift.config import ActorConfig, EnvConfig
 from laneshift.envspec import make_env
 from laneshift.learner.weights import tensors_digest
+from laneshift.nstep import NStepAccumulator, NStepItem
 
 from .exploration import make_schedule
 from .policy import QPolicy
@@ -60,11 +62,13 @@ class WorkerSummary:
 
 class EnvWorker:
     def __init__(self, name: str, index: int, env_cfg: EnvConfig, actor_cfg: ActorConfig,
-                 hidden: tuple[int, ...], sync: bool, rehearsal: bool):
+                 hidden: tuple[int, ...], sync: bool, rehearsal: bool, n_step: int = 1, gamma: float = 0.99):
         torch.set_num_threads(actor_cfg.torch_threads)
         self.name, self.index, self.cfg = name, index, actor_cfg
         self.sync, self.rehearsal = sync, rehearsal
         self.envs = [make_env(env_cfg) for _ in range(actor_cfg.envs_per_worker)]
+        self.n_step, self.gamma = n_step, gamma
+        NStepAccumulator(n_step, gamma)  # refuses a bad n or gamma here, not mid-run
         space = self.envs[0].observation_space
         self.policy = QPolicy(tuple(space.shape), int(self.envs[0].action_space.n), hidden,
                               seed=actor_cfg.seed + 7919 * index)
@@ -120,18 +124,18 @@ class EnvWorker:
         steps = episodes = seq = 0
         versions: list[int] = []
         iters = max(1, -(-self.cfg.send_every // n_envs))
+        pending = [NStepAccumulator(self.n_step, self.gamma) for _ in self.envs]
+        items: list[NStepItem] = []
         while steps < env_steps and not links.stop_requested():
             if not self.sync:  # sync is paced by the learner's rounds already
                 links.wait_insert_ok()
-            rows: dict[str, list] = {k: [] for k in ("obs", "action", "reward", "next_obs", "terminated", "truncated")}
             for _ in range(iters):
                 eps = epsilon(steps)
                 actions = self.policy.act(obs, eps)
                 for j, env in enumerate(self.envs):
                     next_obs, reward, terminated, truncated, info = env.step(int(actions[j]))
-                    for k, v in (("obs", obs[j].copy()), ("action", actions[j]), ("reward", reward), ("next_obs", next_obs),
-                                 ("terminated", terminated), ("truncated", truncated)):
-                        rows[k].append(v)
+                    items += pending[j].push(obs[j].copy(), int(actions[j]), float(reward), next_obs,
+                                             bool(terminated), bool(truncated))
                     ep_return[j] += reward
                     ep_len[j] += 1
                     if terminated or truncated:
@@ -148,11 +152,18 @@ class EnvWorker:
                 steps += n_envs
                 if steps >= env_steps:
                     break
+            if steps >= env_steps or links.stop_requested():  # the budget's last items bootstrap from here
+                for j, acc in enumerate(pending):
+                    items += acc.flush(obs[j].copy())
+            if not items:  # n-step: nothing complete yet (fewer than n steps so far)
+                continue
             batch = wire.TransitionBatch.from_arrays(
                 actor=self.name, seq=seq, weights_version=self.policy.version, phase=self.policy.phase,
-                env_steps=steps, obs=np.stack(rows["obs"]), action=np.asarray(rows["action"]),
-                reward=np.asarray(rows["reward"], np.float32), next_obs=np.stack(rows["next_obs"]),
-                terminated=np.asarray(rows["terminated"]), truncated=np.asarray(rows["truncated"]))
+                env_steps=steps, obs=np.stack([it.obs for it in items]), action=[it.action for it in items],
+                reward=[it.reward for it in items], next_obs=np.stack([it.next_obs for it in items]),
+                terminated=[it.terminated for it in items], truncated=[it.truncated for it in items],
+                steps=[it.steps for it in items])
+            items = []
             links.send_transitions(wire.encode_transitions(batch))
             versions.append(self.policy.version)
             seq += 1

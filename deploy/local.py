@@ -41,10 +41,12 @@ def free_tcp_port() -> int:
 
 
 def _default_demo_episodes(cfg: RunConfig) -> int:
-    """Scripted episodes for the default shard: enough for retention's demo region (or 2,000
-    transitions for rehearsal), at least 20."""
+    """Scripted episodes for the default shard: ``train.demo_episodes``, else enough for
+    retention's demo region (or 2,000 transitions for rehearsal), at least 20."""
     from laneshift.envspec import make_env
 
+    if cfg.train.demo_episodes:
+        return cfg.train.demo_episodes
     need = cfg.replay.capacity * cfg.replay.demo_ratio if cfg.replay.demo_mode == "retention" else 2_000
     probe = make_env(cfg.env)
     horizon = getattr(probe.unwrapped, "max_steps", None) or 100
@@ -55,8 +57,12 @@ def _default_demo_episodes(cfg: RunConfig) -> int:
 def default_demo_dir(cfg: RunConfig, episodes: int) -> Path:
     """Where the default scripted shard lives (shared by runs; its size is in the name, so a run
     that needs more demos gets a larger shard instead of a refusal)."""
+    from laneshift.envspec import env_spec
+
     env = cfg.env
-    name = f"{env.scenario.replace('/', '_')}-{env.observation}-p{env.reward_preset}-scripted-{episodes}ep"
+    # The observation's shape is in the name: a layout change makes a new shard, not a refusal.
+    shape = "x".join(str(d) for d in env_spec(env).schema.obs_shape)
+    name = f"{env.scenario.replace('/', '_')}-{env.observation}{shape}-p{env.reward_preset}-scripted-{episodes}ep"
     return Path(cfg.train.run_dir).resolve().parent / "demos" / name
 
 

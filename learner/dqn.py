@@ -44,6 +44,8 @@ class DoubleDQN:
         reward = torch.as_tensor(batch["reward"], dtype=torch.float32)
         next_obs = torch.as_tensor(batch["next_obs"])
         not_done = 1.0 - torch.as_tensor(batch["terminated"], dtype=torch.float32)
+        # n-step items (laneshift.nstep) sum `steps` rewards: bootstrap with gamma ** steps.
+        steps = torch.as_tensor(batch.get("steps", np.ones(len(reward), np.uint8)), dtype=torch.float32)
         weight = torch.as_tensor(batch.get("weight", np.ones(len(reward), np.float32)), dtype=torch.float32)
 
         # Q(s, a) of the actions taken.
@@ -54,7 +56,7 @@ class DoubleDQN:
             chooser = self.online if self.cfg.double else self.target
             next_action = chooser(next_obs).argmax(dim=1, keepdim=True)
             next_q = self.target(next_obs).gather(1, next_action).squeeze(1)
-            td_target = reward + self.cfg.gamma * not_done * next_q
+            td_target = reward + torch.pow(self.cfg.gamma, steps) * not_done * next_q
         td_error = q - td_target
         loss = (weight * F.huber_loss(q, td_target, reduction="none", delta=self.cfg.huber_delta)).mean()
         margin_loss = torch.zeros(())

@@ -12,7 +12,7 @@ last checkpoint started (``replay.checkpoint_every_s`` plus the copy time).
 The demo table is not checkpointed: it is reloaded from its shard, whose sha256 is verified.
 
 Layout of ``<run dir>/replay_checkpoint/``: one ``.npy`` per column (``obs``, ``next_obs``,
-``action``, ``reward``, ``terminated``, ``truncated``, ``actor``, ``version``, ``key``) and
+``action``, ``reward``, ``terminated``, ``truncated``, ``steps``, ``actor``, ``version``, ``key``) and
 ``meta.json`` (format version, schema, counters, per-actor stats).
 """
 
@@ -29,8 +29,8 @@ import numpy as np
 if TYPE_CHECKING:  # pragma: no cover
     from .core import ReplayCore
 
-FORMAT = 1
-COLUMNS = ("obs", "next_obs", "action", "reward", "terminated", "truncated", "actor", "version", "seq", "key")
+FORMAT = 2  # 2: the steps column (n-step returns)
+COLUMNS = ("obs", "next_obs", "action", "reward", "terminated", "truncated", "steps", "actor", "version", "seq", "key")
 CHUNK_BYTES = 4 * 2**20  # rows copied per lock hold: ~4 MiB
 
 

@@ -201,6 +201,7 @@ class ReplayCore:
             "obs": np.empty((n, *self.schema.obs_shape), self.schema.obs_dtype),
             "next_obs": np.empty((n, *self.schema.obs_shape), self.schema.obs_dtype),
             "action": np.empty(n, np.int64), "reward": np.empty(n, np.float32), "terminated": np.empty(n, np.uint8),
+            "steps": np.empty(n, np.uint8),
         }
         d, o = is_demo, ~is_demo
         for name in out:

@@ -1,7 +1,9 @@
 """Load demo shards (Minari datasets) into the replay server's fixed demo table.
 
 Shards are validated against the run's env (id, observation shape and dtype, action count)
-and their sha256 is checked; a mismatch refuses the start with a message naming it.
+and their sha256 is checked; a mismatch refuses the start with a message naming it. With
+``n_step > 1`` the shard's transitions become n-step items within each recorded episode
+(laneshift.nstep), the same items the actors send.
 """
 
 from __future__ import annotations
@@ -10,11 +12,13 @@ import numpy as np
 
 from laneshift.config import EnvConfig
 from laneshift.envspec import EnvSpec
+from laneshift.nstep import nstep_arrays
 
 from .storage import DemoTable
 
 
-def load_demo_table(paths: tuple[str, ...] | list[str], spec: EnvSpec) -> DemoTable:
+def load_demo_table(paths: tuple[str, ...] | list[str], spec: EnvSpec, n_step: int = 1,
+                    gamma: float = 0.99) -> DemoTable:
     from laneshift.demos.shard import ShardError, load_shards
 
     try:
@@ -31,9 +35,13 @@ def load_demo_table(paths: tuple[str, ...] | list[str], spec: EnvSpec) -> DemoTa
         if recorded[key] != run_kwargs[key]:
             raise ValueError(f"replay.demo_paths: the demo shard was recorded with {key}={recorded[key]!r}, "
                              f"the run uses {key}={run_kwargs[key]!r}")
-    return DemoTable(obs=np.ascontiguousarray(shard.observations),
-                     action=np.asarray(shard.actions, np.int64),
-                     reward=np.asarray(shard.rewards, np.float32),
-                     next_obs=np.ascontiguousarray(shard.next_observations),
-                     terminated=np.asarray(shard.terminations, np.uint8),
-                     sha256=shard.sha256, metadata=dict(shard.metadata))
+    reward = np.asarray(shard.rewards, np.float32)
+    next_obs = np.ascontiguousarray(shard.next_observations)
+    terminated = np.asarray(shard.terminations, np.uint8)
+    steps = np.ones(reward.shape[0], np.uint8)
+    if n_step > 1:
+        reward, next_obs, terminated, steps = nstep_arrays(reward, next_obs, terminated, shard.episode_ids,
+                                                           n_step, gamma)
+    return DemoTable(obs=np.ascontiguousarray(shard.observations), action=np.asarray(shard.actions, np.int64),
+                     reward=reward, next_obs=np.ascontiguousarray(next_obs), terminated=terminated,
+                     sha256=shard.sha256, metadata=dict(shard.metadata), steps=steps)

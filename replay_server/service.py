@@ -136,7 +136,9 @@ def build_core(cfg: RunConfig) -> ReplayCore:
     from laneshift.envspec import env_spec
 
     spec = env_spec(cfg.env)
-    demo = load_demo_table(cfg.replay.demo_paths, spec) if cfg.replay.demo_paths else None
+    demo = None
+    if cfg.replay.demo_paths:  # demos become the same n-step items the actors send
+        demo = load_demo_table(cfg.replay.demo_paths, spec, cfg.learner.n_step, cfg.learner.gamma)
     return ReplayCore(cfg.replay, spec.schema, demo)
 
 

@@ -28,6 +28,7 @@ class RingTable:
         self.reward = np.zeros(self.capacity, np.float32)
         self.terminated = np.zeros(self.capacity, np.uint8)
         self.truncated = np.zeros(self.capacity, np.uint8)
+        self.steps = np.ones(self.capacity, np.uint8)  # n-step: rewards summed in `reward`
         self.actor = np.zeros(self.capacity, np.int16)  # index into the server's actor list
         self.version = np.zeros(self.capacity, np.int64)  # weights version that acted
         self.key = np.full(self.capacity, -1, np.int64)  # each row's item key (-1: empty)
@@ -41,7 +42,7 @@ class RingTable:
     @property
     def nbytes(self) -> int:
         return sum(a.nbytes for a in (self.obs, self.next_obs, self.action, self.reward, self.terminated,
-                                      self.truncated, self.actor, self.version, self.key, self.seq))
+                                      self.truncated, self.steps, self.actor, self.version, self.key, self.seq))
 
     def insert(self, batch: TransitionBatch, actor_index: int) -> np.ndarray:
         """Store a validated batch; returns the keys of the items stored."""
@@ -55,6 +56,7 @@ class RingTable:
         self.reward[rows] = batch.reward[skip:]
         self.terminated[rows] = batch.terminated[skip:]
         self.truncated[rows] = batch.truncated[skip:]
+        self.steps[rows] = batch.steps[skip:]
         self.actor[rows] = actor_index
         self.version[rows] = batch.weights_version
         self.key[rows] = keys
@@ -84,31 +86,37 @@ class DemoTable:
     terminated: np.ndarray
     sha256: str
     metadata: dict
+    steps: np.ndarray | None = None  # n-step: rewards summed in `reward` (None: all 1)
 
     def __post_init__(self) -> None:
-        for arr in (self.obs, self.action, self.reward, self.next_obs, self.terminated):
+        if self.steps is None:
+            self.steps = np.ones(self.size, np.uint8)
+        for arr in self._arrays():
             arr.flags.writeable = False  # a bug elsewhere must not be able to corrupt the demos
 
     @property
     def size(self) -> int:
         return int(self.action.shape[0])
 
+    def _arrays(self) -> tuple[np.ndarray, ...]:
+        return (self.obs, self.action, self.reward, self.next_obs, self.terminated, self.steps)
+
     @property
     def nbytes(self) -> int:
-        return sum(a.nbytes for a in (self.obs, self.action, self.reward, self.next_obs, self.terminated))
+        return sum(a.nbytes for a in self._arrays())
 
     def digest(self) -> str:
         """sha256 over the table's arrays as held in memory (to prove nothing was changed)."""
         import hashlib
 
         h = hashlib.sha256()
-        for arr in (self.obs, self.action, self.reward, self.next_obs, self.terminated):
+        for arr in self._arrays():
             h.update(np.ascontiguousarray(arr).tobytes())
         return h.hexdigest()
 
     def subset(self, rows: np.ndarray) -> "DemoTable":
         return DemoTable(self.obs[rows], self.action[rows], self.reward[rows], self.next_obs[rows],
-                         self.terminated[rows], self.sha256, self.metadata)
+                         self.terminated[rows], self.sha256, self.metadata, self.steps[rows])
 
     @classmethod
     def empty(cls, obs_shape: tuple[int, ...], obs_dtype: str) -> "DemoTable":

@@ -39,10 +39,10 @@ def test_bench_replay_json_end_to_end(capsys) -> None:
     for key in ("ingest_vector_per_s", "ingest_grayscale_per_s", "sample_p50_ms", "sample_p99_ms"):
         assert out[key] > 0, key
     assert out["sample_p50_ms"] <= out["sample_p99_ms"]
-    assert out["vector_obs"] == {"shape": [67], "dtype": "<f4"}
+    assert out["vector_obs"] == {"shape": [82], "dtype": "<f4"}
     assert out["grayscale_obs"] == {"shape": [4, 100, 100], "dtype": "|u1"}
     # Bytes per stored transition: at least the two observations, plus a few fixed columns.
-    assert 2 * 67 * 4 < out["bytes_per_transition_vector"] < 2 * 67 * 4 + 64
+    assert 2 * 82 * 4 < out["bytes_per_transition_vector"] < 2 * 82 * 4 + 64
     assert 2 * 40_000 < out["bytes_per_transition_grayscale"] < 2 * 40_000 + 64
     assert [row["actors"] for row in out["actor_scaling"]] == [2]
     for run in (out["ingest_vector"], out["ingest_grayscale"], *out["actor_scaling"],
@@ -53,7 +53,7 @@ def test_bench_replay_json_end_to_end(capsys) -> None:
     for key in ("sample_under_saturating_ingest", "sample_under_paced_ingest"):
         lat = out[key]
         assert lat["n"] >= 5 and 0 < lat["p50_ms"] <= lat["p99_ms"] <= lat["max_ms"]
-    assert out["sample_idle"]["reply_bytes"] > bench_replay.SAMPLE_BATCH * 2 * 67 * 4
+    assert out["sample_idle"]["reply_bytes"] > bench_replay.SAMPLE_BATCH * 2 * 82 * 4
     assert set(out["met"]) == {"ingest_vector", "sample_p99"}
     text = bench_replay.format_result(out)  # the text form renders from the same dict
     assert "actor scaling" in text and "sample latency" in text
@@ -61,7 +61,7 @@ def test_bench_replay_json_end_to_end(capsys) -> None:
 
 
 def test_patched_messages_decode_with_their_counters() -> None:
-    schema = wire.TransitionSchema((67,), "float32", 9)
+    schema = wire.TransitionSchema((82,), "float32", 9)
     patcher = bench_replay.synthetic_message("w3", schema, 4, np.random.default_rng(0))
     for seq in (0, 1, 99, 123_456_789):
         batch = wire.decode_transitions(patcher.build(seq, (seq + 1) * 4), schema)

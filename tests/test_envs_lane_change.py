@@ -203,3 +203,32 @@ def test_meta_action_set() -> None:
         if term:
             break
     assert info["lane_index"] < 2 or info["crashed"]
+
+
+def test_lane_block_states_the_gaps_around_the_ego_vehicle() -> None:
+    """The lane features agree with the traffic arrays: nearest car ahead/behind on each lane."""
+    from laneshift.actors.envs.observations import EGO_FEATURES, GAP_RANGE, GAP_SCALE, GAP_SPEED_SCALE
+
+    env = make_env("straight")
+    obs, _ = env.reset(seed=3, options={"initial_lane": 1})
+    u = env.unwrapped
+    ego, t = u.ego, u.traffic
+    block = obs[len(EGO_FEATURES): len(EGO_FEATURES) + 15].reshape(3, 5)
+    for slot, lane in enumerate((1, 0, 2)):  # current, left, right
+        d = t.s[t.lane == lane] - ego.loc.s[lane]
+        v = t.speed[t.lane == lane]
+        ahead, behind = d >= 0, d < 0
+        front = d[ahead].min() - ego.LENGTH if ahead.any() else math.inf
+        rear = -d[behind].max() - ego.LENGTH if behind.any() else math.inf
+        assert block[slot, 0] == 1.0
+        assert block[slot, 1] == pytest.approx(min(front, GAP_RANGE) / GAP_SCALE, abs=1e-5)
+        assert block[slot, 3] == pytest.approx(min(rear, GAP_RANGE) / GAP_SCALE, abs=1e-5)
+        if front <= GAP_RANGE:
+            assert block[slot, 2] == pytest.approx((v[ahead][d[ahead].argmin()] - ego.speed) / GAP_SPEED_SCALE, abs=1e-5)
+    # From the leftmost lane there is no left neighbour: that slot is all zero.
+    obs, _ = env.reset(seed=3, options={"initial_lane": 0})
+    assert not obs[len(EGO_FEATURES) + 5: len(EGO_FEATURES) + 10].any()
+    # The layout without lane features is still available.
+    assert make_env("straight", lane_features=False).observation_space.shape == (vector_size(8, False),)
+    with pytest.raises(ValueError, match="lane_features"):
+        make_env("straight", lane_features="yes")

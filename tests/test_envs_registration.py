@@ -35,4 +35,4 @@ def test_module_id_form_in_a_fresh_process(module: str) -> None:
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
-    assert "StraightLaneChange (67,) True" in out.stdout and "LaneKeepingAssist (6,) True" in out.stdout
+    assert "StraightLaneChange (82,) True" in out.stdout and "LaneKeepingAssist (6,) True" in out.stdout

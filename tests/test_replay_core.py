@@ -581,7 +581,7 @@ def test_stats_shape_is_json_and_complete():
 def test_demo_digest_is_sha256_of_the_arrays():
     t = demo_table(5)
     h = hashlib.sha256()
-    for a in (t.obs, t.action, t.reward, t.next_obs, t.terminated):
+    for a in (t.obs, t.action, t.reward, t.next_obs, t.terminated, t.steps):
         h.update(a.tobytes())
     assert t.digest() == h.hexdigest()
     assert t.subset(np.arange(5)).digest() == t.digest() != t.subset(np.arange(4)).digest()

@@ -36,6 +36,27 @@ def test_sampled_demo_items_are_byte_identical_to_the_file(straight_shard):
     assert (batch.terminated == shard.terminations[rows]).all()
 
 
+def test_n_step_runs_serve_the_shard_as_n_step_items(straight_shard):
+    """learner.n_step > 1: the demo table holds each episode's n-step items (laneshift.nstep)."""
+    from laneshift.nstep import nstep_arrays
+
+    cfg = load_run_config(overrides={"env.scenario": "straight", "replay.demo_mode": "rehearsal",
+                                     "replay.demo_paths": straight_shard, "learner.n_step": 5})
+    core = build_core(cfg)
+    shard = load_shard(straight_shard)
+    ret, nxt, term, steps = nstep_arrays(shard.rewards, shard.next_observations, shard.terminations,
+                                         shard.episode_ids, 5, cfg.learner.gamma)
+    batch = wire.decode_batch(core.handle_sample_query(wire.encode_sample_request(wire.SampleRequest(256, 1))),
+                              core.schema)
+    rows = batch.index
+    np.testing.assert_array_equal(batch.obs, shard.observations[rows])
+    np.testing.assert_array_equal(batch.reward, ret[rows])
+    np.testing.assert_array_equal(batch.next_obs, nxt[rows])
+    np.testing.assert_array_equal(batch.steps, steps[rows])
+    np.testing.assert_array_equal(batch.terminated, term[rows])
+    assert steps.max() == 5 and steps.min() == 1  # episode ends shorten the last windows
+
+
 def test_shard_of_another_env_or_preset_is_refused(straight_shard):
     cfg = load_run_config(overrides={"env.scenario": "lka", "replay.demo_mode": "rehearsal",
                                      "replay.demo_paths": straight_shard})

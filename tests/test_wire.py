@@ -69,7 +69,8 @@ def batch_arrays(rows: int = 2, obs_shape: tuple[int, ...] = (3,), obs_dtype: st
         obs = rng.integers(0, 255, size=(rows, *obs_shape)).astype(obs_dtype)
     return {"obs": obs, "action": (np.arange(rows) % 9).astype(np.int64),
             "reward": rng.normal(size=rows).astype(np.float32), "next_obs": obs[::-1].copy(),
-            "terminated": (np.arange(rows) % 2).astype(np.uint8), "truncated": np.zeros(rows, np.uint8)}
+            "terminated": (np.arange(rows) % 2).astype(np.uint8), "truncated": np.zeros(rows, np.uint8),
+            "steps": (1 + np.arange(rows) % 3).astype(np.uint8)}
 
 
 def make_batch(rows: int = 2, **kw) -> TransitionBatch:
@@ -116,9 +117,11 @@ def check_batch_fits(batch: TransitionBatch, schema: TransitionSchema) -> None:
         assert arr.shape == (rows, *schema.obs_shape) and arr.dtype.str == schema.obs_dtype
         if arr.dtype.kind == "f":
             assert np.isfinite(arr).all()
-    for name, code in (("action", "<i8"), ("reward", "<f4"), ("terminated", "|u1"), ("truncated", "|u1")):
+    for name, code in (("action", "<i8"), ("reward", "<f4"), ("terminated", "|u1"), ("truncated", "|u1"),
+                       ("steps", "|u1")):
         arr = getattr(batch, name)
         assert arr.shape == (rows,) and arr.dtype.str == code
+    assert (batch.steps >= 1).all()
     assert ((batch.action >= 0) & (batch.action < schema.n_actions)).all()
     assert np.isin(batch.terminated, (0, 1)).all() and np.isin(batch.truncated, (0, 1)).all()
     assert np.isfinite(batch.reward).all()
@@ -127,7 +130,7 @@ def check_batch_fits(batch: TransitionBatch, schema: TransitionSchema) -> None:
 def assert_same_batch(a: TransitionBatch, b: TransitionBatch) -> None:
     for f in ("actor", "seq", "weights_version", "phase", "env_steps", "extra"):
         assert getattr(a, f) == getattr(b, f), f
-    for f in ("obs", "action", "reward", "next_obs", "terminated", "truncated"):
+    for f in ("obs", "action", "reward", "next_obs", "terminated", "truncated", "steps"):
         x, y = getattr(a, f), getattr(b, f)
         assert x.dtype == y.dtype and x.shape == y.shape and np.array_equal(x, y), f
 
@@ -136,7 +139,7 @@ def assert_same_batch(a: TransitionBatch, b: TransitionBatch) -> None:
 
 
 def test_constants_and_kind_numbers_are_the_documented_ones():
-    assert (MAGIC, WIRE_VERSION) == (b"LSHF", 1)
+    assert (MAGIC, WIRE_VERSION) == (b"LSHF", 2)
     assert (MAX_HEADER_BYTES, MAX_MESSAGE_BYTES, MAX_BATCH_ROWS) == (65536, 256 * 2**20, 65536)
     assert {k.name: int(k) for k in Kind} == {"TRANSITIONS": 1, "WEIGHTS": 2, "SAMPLE_REQUEST": 3, "BATCH": 4,
                                               "ERROR": 5, "JSON": 6, "PRIORITIES": 7}
@@ -146,7 +149,7 @@ def test_constants_and_kind_numbers_are_the_documented_ones():
 def test_envelope_layout_byte_by_byte():
     msg = encode(Kind.JSON, {"body": {"a": 1}}, {"x": np.array([1, 2], np.uint16)})
     magic, version, kind, reserved, hlen = struct.unpack_from("<4sHBBI", msg, 0)
-    assert (magic, version, kind, reserved) == (b"LSHF", 1, 6, 0)
+    assert (magic, version, kind, reserved) == (b"LSHF", 2, 6, 0)
     header = json.loads(msg[12:12 + hlen])
     assert header == {"body": {"a": 1}, "arrays": [{"name": "x", "dtype": "<u2", "shape": [2]}]}
     assert msg[12 + hlen:] == b"\x01\x00\x02\x00"
@@ -281,7 +284,7 @@ def test_sample_request_actors_field_is_optional():
 def _sampled(rows: int = 4, nb: int = 2) -> SampledBatch:
     a = batch_arrays(rows)
     return SampledBatch(obs=a["obs"], action=a["action"], reward=a["reward"], next_obs=a["next_obs"],
-                        terminated=a["terminated"], is_demo=np.array([1, 0, 0, 1][:rows], np.uint8),
+                        terminated=a["terminated"], steps=a["steps"], is_demo=np.array([1, 0, 0, 1][:rows], np.uint8),
                         index=np.arange(rows, dtype=np.int64) * 10, weight=np.ones(rows, np.float32),
                         num_batches=nb, info={"phase": 1})
 
@@ -324,7 +327,8 @@ def test_wrong_magic():
 
 
 def test_wrong_version():
-    assert reason_of(decode, envelope(6, {"body": {}, "arrays": []}, version=2)) == "wrong_version"
+    assert reason_of(decode, envelope(6, {"body": {}, "arrays": []}, version=1)) == "wrong_version"
+    assert reason_of(decode, envelope(6, {"body": {}, "arrays": []}, version=3)) == "wrong_version"
     assert reason_of(decode, envelope(6, {"body": {}, "arrays": []}, version=0)) == "wrong_version"
 
 
@@ -489,7 +493,7 @@ def test_extra_is_optional():
     assert out.extra == {}
 
 
-@pytest.mark.parametrize("name", ["obs", "action", "reward", "next_obs", "terminated", "truncated"])
+@pytest.mark.parametrize("name", ["obs", "action", "reward", "next_obs", "terminated", "truncated", "steps"])
 def test_missing_array(name):
     assert reason_of(decode_transitions, tmsg(drop=(name,)), SCHEMA) == "bad_arrays"
 
@@ -507,7 +511,8 @@ def test_row_count_limits():
 
 @pytest.mark.parametrize("arrays", [{"obs": np.zeros((2, 4), np.float32)}, {"next_obs": np.zeros((2, 3, 1), np.float32)},
                                     {"obs": np.zeros((3, 3), np.float32)}, {"reward": np.zeros(3, np.float32)},
-                                    {"terminated": np.zeros(1, np.uint8)}, {"truncated": np.zeros((2, 1), np.uint8)}])
+                                    {"terminated": np.zeros(1, np.uint8)}, {"truncated": np.zeros((2, 1), np.uint8)},
+                                    {"steps": np.ones(3, np.uint8)}])
 def test_wrong_shapes(arrays):
     assert reason_of(decode_transitions, tmsg(arrays=arrays), SCHEMA) == "bad_shape"
 
@@ -515,7 +520,7 @@ def test_wrong_shapes(arrays):
 @pytest.mark.parametrize("arrays", [{"obs": np.zeros((2, 3), np.float64)}, {"next_obs": np.zeros((2, 3), np.uint8)},
                                     {"action": np.zeros(2, np.int32)}, {"action": np.zeros(2, np.uint8)},
                                     {"reward": np.zeros(2, np.float64)}, {"terminated": np.zeros(2, np.bool_)},
-                                    {"truncated": np.zeros(2, np.int64)}])
+                                    {"truncated": np.zeros(2, np.int64)}, {"steps": np.ones(2, np.int64)}])
 def test_wrong_dtypes(arrays):
     assert reason_of(decode_transitions, tmsg(arrays=arrays), SCHEMA) == "bad_dtype"
 
@@ -542,6 +547,18 @@ def test_action_edges_accepted():
 @pytest.mark.parametrize("name,values", [("terminated", [0, 2]), ("terminated", [255, 0]), ("truncated", [1, 2])])
 def test_terminated_truncated_must_be_0_or_1(name, values):
     assert reason_of(decode_transitions, tmsg(arrays={name: np.array(values, np.uint8)}), SCHEMA) == "bad_value"
+
+
+def test_steps_must_be_at_least_1():
+    assert reason_of(decode_transitions, tmsg(arrays={"steps": np.array([1, 0], np.uint8)}), SCHEMA) == "bad_value"
+    assert decode_transitions(tmsg(arrays={"steps": np.array([1, 255], np.uint8)}), SCHEMA).steps.tolist() == [1, 255]
+
+
+def test_steps_default_to_one_step_transitions():
+    fields = batch_arrays(3)
+    del fields["steps"]
+    b = TransitionBatch.from_arrays(actor="w0", seq=0, weights_version=0, phase=0, env_steps=3, **fields)
+    assert b.steps.tolist() == [1, 1, 1] and b.steps.dtype == np.uint8
 
 
 @pytest.mark.parametrize("name", ["obs", "next_obs", "reward"])
@@ -822,7 +839,7 @@ def test_batch_with_scalar_action_is_a_wire_error():
     ``action`` of shape ``[]`` raises IndexError (the learner's ReplayClient.sample does not catch
     it). Fix: require ``action.ndim == 1`` first (reason bad_shape)."""
     specs = [{"name": n, "dtype": "<i8", "shape": []} for n in wire._BATCH_FIELDS]
-    assert reason_of(decode_batch, envelope(4, {"num_batches": 1, "arrays": specs}, b"\0" * 64), SCHEMA) == "bad_shape"
+    assert reason_of(decode_batch, envelope(4, {"num_batches": 1, "arrays": specs}, b"\0" * 8 * len(specs)), SCHEMA) == "bad_shape"
 
 
 def test_json_validation():

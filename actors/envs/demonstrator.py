@@ -84,19 +84,7 @@ class ScriptedDriver:
 
     def _neighbours(self, lane: int) -> tuple[float, float, float, float]:
         """(gap ahead, speed ahead, gap behind, speed behind) on ``lane``, bumper to bumper [m]."""
-        env = self.env
-        ego = env.ego
-        s_occ, v_occ = env.lane_occupants(lane, exclude=ego)
-        s_e = ego.loc.s[lane]
-        length = ego.LENGTH
-        front, v_front, rear, v_rear = math.inf, 0.0, math.inf, 0.0
-        for s, v in zip(s_occ, v_occ):
-            d = env.lane_gap(lane, s_e, float(s))
-            if d >= 0 and d - length < front:
-                front, v_front = d - length, float(v)
-            elif d < 0 and -d - length < rear:
-                rear, v_rear = -d - length, float(v)
-        return front, v_front, rear, v_rear
+        return self.env.lane_neighbours(self.env.ego, lane)
 
     def _gap_safe(self, lane: int) -> bool:
         """Is ``lane`` free around the ego vehicle during the whole lane change, and can the ego

@@ -32,7 +32,7 @@ from highway_env.vehicle.kinematics import Vehicle
 from . import scenarios
 from .actions import META_ACTIONS, SPEED_CHANGES, curvature_to_steering, paper_actions
 from .control import curvature_index, lane_errors, meta_acceleration, meta_steering
-from .observations import OBS_LIMIT, vector_observation, vector_size
+from .observations import OBS_LIMIT, lane_block, vector_observation, vector_size
 from .rendering import TopDownRenderer
 from .rewards import DEFAULT_REWARD_PRESET, REWARD_TERM_NAMES, compute_reward, get_preset, motion_flags
 from .traffic import AgentVehicle, Traffic, collisions, locate
@@ -91,6 +91,7 @@ class LaneChangeEnv(gym.Env):
         stack_size: int = 4,
         scaling: float = 2.0,
         vehicles_observed: int = 8,
+        lane_features: bool = True,
         speed_step: float = 0.1,
         curvature_step: float = 0.01,
         ego_speed_spread: float = 2.0,
@@ -144,6 +145,9 @@ class LaneChangeEnv(gym.Env):
         self.stack_size = _int_arg("stack_size", stack_size, 1)
         self.scaling = _float_arg("scaling", scaling, 0.0, lo_open=True)
         self.vehicles_observed = _int_arg("vehicles_observed", vehicles_observed, 0)
+        if not isinstance(lane_features, (bool, np.bool_)):
+            raise ValueError(f"lane_features must be True or False, got {lane_features!r}")
+        self.lane_features = bool(lane_features)
         self.speed_step = _float_arg("speed_step", speed_step, 0.0)
         self.curvature_step = _float_arg("curvature_step", curvature_step, 0.0, 2.0 / Vehicle.LENGTH)
         self.ego_speed_spread = _float_arg("ego_speed_spread", ego_speed_spread, 0.0)
@@ -167,7 +171,7 @@ class LaneChangeEnv(gym.Env):
         # ---- spaces ---------------------------------------------------------------------------
         self.actions = paper_actions(self.speed_step, self.curvature_step)
         self.action_space = spaces.Discrete(len(self.actions) if action_set == "paper" else len(META_ACTIONS))
-        self.vector_dim = vector_size(self.vehicles_observed)
+        self.vector_dim = vector_size(self.vehicles_observed, self.lane_features)
         self.vector_space = spaces.Box(-OBS_LIMIT, OBS_LIMIT, shape=(self.vector_dim,), dtype=np.float32)
         if observation == "vector":
             self.observation_space = self.vector_space
@@ -230,6 +234,48 @@ class LaneChangeEnv(gym.Env):
                 s.append(np.array([a.loc.s[lane]]))
                 v.append(np.array([a.speed * math.cos(a.heading - a.loc.heading[lane])]))
         return np.concatenate(s), np.concatenate(v)
+
+    def lane_neighbours(self, v: AgentVehicle, lane: int) -> tuple[float, float, float, float]:
+        """(gap ahead, speed ahead, gap behind, speed behind) around ``v`` on ``lane``: bumper-to-
+        bumper distances [m] (``inf`` when nobody is there) and speeds along the lane [m/s]."""
+        s_occ, v_occ = self.lane_occupants(lane, exclude=v)
+        if s_occ.size == 0:
+            return math.inf, 0.0, math.inf, 0.0
+        d = s_occ - v.loc.s[lane]
+        path = self.layout.paths[lane]
+        if path.closed:
+            d = (d + path.length / 2) % path.length - path.length / 2
+        ahead, behind = d >= 0, d < 0
+        front = rear = math.inf
+        v_front = v_rear = 0.0
+        if ahead.any():
+            i = int(np.argmin(np.where(ahead, d, np.inf)))
+            front, v_front = float(d[i]) - v.LENGTH, float(v_occ[i])
+        if behind.any():
+            i = int(np.argmax(np.where(behind, d, -np.inf)))
+            rear, v_rear = float(-d[i]) - v.LENGTH, float(v_occ[i])
+        return front, v_front, rear, v_rear
+
+    def adjacent_lane(self, v: AgentVehicle, side: int) -> int | None:
+        """The lane next to ``v``'s on ``side`` (-1 left, +1 right), if the road has one there."""
+        loc = v.loc
+        lane = loc.lane + side
+        if not 0 <= lane < self.layout.lanes_count or not loc.inside[lane]:
+            return None
+        width = self.layout.paths[lane].width
+        return lane if abs(abs(loc.lat[lane] - loc.lat[loc.lane]) - width) < 0.5 else None
+
+    def _lane_features(self, v: AgentVehicle) -> np.ndarray:
+        loc = v.loc
+        forward = v.speed * math.cos(v.heading - loc.heading[loc.lane])
+        slots = []
+        for lane in (loc.lane, self.adjacent_lane(v, -1), self.adjacent_lane(v, +1)):
+            if lane is None:
+                slots.append(None)
+                continue
+            front, v_front, rear, v_rear = self.lane_neighbours(v, lane)
+            slots.append((front, v_front - forward, rear, v_rear - forward))
+        return lane_block(slots)
 
     def lane_gap(self, lane: int, s_from: float, s_to: float) -> float:
         """Signed arc-length difference s_to - s_from on ``lane`` (wrapped on rings)."""
@@ -463,6 +509,7 @@ class LaneChangeEnv(gym.Env):
             float(v.position[0]), float(v.position[1]), v.heading, v.speed, v.loc,
             self.layout.paths[v.loc.lane].width, self.layout.lanes_count, self.target_lane, self.curvature_step,
             ox, oy, oh, ov, ol, self.vehicles_observed,
+            self._lane_features(v) if self.lane_features else None,
         )
 
     def _observe(self) -> np.ndarray:

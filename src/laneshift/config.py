@@ -178,6 +178,9 @@ class LearnerConfig:
 
     lr: float = 5e-4
     gamma: float = 0.99
+    # n-step returns (DQfD, Rainbow): actors and the demo loader sum n rewards per item, the target
+    # bootstraps with gamma^n. 1 = the paper's one-step Double DQN.
+    n_step: int = 1
     batch_size: int = 256  # MATLAB minibatch 256
     hidden: tuple[int, ...] = (256, 256)  # MLP for vector observations (CNN for grayscale)
     target_update_period: int = 500  # updates between hard target-network syncs
@@ -200,6 +203,8 @@ class LearnerConfig:
     def __post_init__(self) -> None:
         _check(self.lr > 0, "learner.lr", "must be > 0", self.lr)
         _check(0.0 <= self.gamma <= 1.0, "learner.gamma", "must be in [0, 1]", self.gamma)
+        _check(not isinstance(self.n_step, bool) and isinstance(self.n_step, int) and 1 <= self.n_step <= 255,
+               "learner.n_step", "must be an int in [1, 255]", self.n_step)
         _check(1 <= self.batch_size <= 8192, "learner.batch_size", "must be 1..8192", self.batch_size)
         _check(len(self.hidden) >= 1 and all(h >= 1 for h in self.hidden), "learner.hidden",
                "must be a non-empty list of positive sizes", self.hidden)
@@ -243,9 +248,14 @@ class TrainConfig:
     eval_episodes: int = 10  # greedy episodes in the final summary (0 = skip)
     # MATLAB's stop criterion: end the run as soon as an episode's return reaches this (inf = never).
     stop_return: float = math.inf
+    # Scripted episodes in the default demo shard (demo modes without replay.demo_paths);
+    # 0 = just enough for the demo region (retention) or 2,000 transitions (rehearsal).
+    demo_episodes: int = 0
     seed: int = 0
 
     def __post_init__(self) -> None:
+        _check(self.demo_episodes >= 0, "train.demo_episodes", "must be >= 0 (0 = sized by need)",
+               self.demo_episodes)
         _check(self.env_steps >= 1, "train.env_steps", "must be >= 1", self.env_steps)
         _check(self.parallel in ("async", "sync"), "train.parallel", "must be async or sync", self.parallel)
         _check(self.log_every_s > 0, "train.log_every_s", "must be > 0", self.log_every_s)
@@ -270,6 +280,10 @@ class RunConfig:
             raise ConfigError(f"replay.spi_tolerance: must be >= the rows of one sample request "
                               f"(learner.batch_size x max(prefetch, updates_per_round) = {rows}), or sampling and "
                               f"inserting could block each other forever, got {self.replay.spi_tolerance!r}")
+        if self.train.parallel == "sync" and self.learner.n_step > self.actor.send_every:
+            # A sync round needs a batch from every worker; its first n - 1 steps complete no item.
+            raise ConfigError(f"learner.n_step: must be <= actor.send_every ({self.actor.send_every}) in sync mode, "
+                              f"or a worker's first round would have nothing to send, got {self.learner.n_step!r}")
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
         return {f.name: _plain(dataclasses.asdict(getattr(self, f.name))) for f in dataclasses.fields(self)}

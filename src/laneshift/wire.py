@@ -43,7 +43,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-WIRE_VERSION = 1
+WIRE_VERSION = 2  # 2: transitions and batches carry `steps` (n-step returns)
 MAGIC = b"LSHF"
 _ENVELOPE = struct.Struct("<4sHBBI")  # magic, version, kind, reserved, header length
 MAX_HEADER_BYTES = 64 * 1024
@@ -303,7 +303,14 @@ class TransitionBatch:
     next_obs: np.ndarray
     terminated: np.ndarray
     truncated: np.ndarray
+    # Rewards summed in `reward` (n-step returns, laneshift.nstep): the learner discounts the
+    # bootstrap value at next_obs by gamma ** steps. 1 for ordinary transitions.
+    steps: np.ndarray | None = None
     extra: dict = field(default_factory=dict)  # free-form JSON fields (e.g. episode ids)
+
+    def __post_init__(self) -> None:
+        if self.steps is None:
+            object.__setattr__(self, "steps", np.ones(len(self), np.uint8))
 
     @classmethod
     def from_arrays(cls, **kw: Any) -> "TransitionBatch":
@@ -311,6 +318,8 @@ class TransitionBatch:
         kw["reward"] = np.asarray(kw["reward"], dtype=np.float32)
         kw["terminated"] = np.asarray(kw["terminated"], dtype=np.uint8)
         kw["truncated"] = np.asarray(kw["truncated"], dtype=np.uint8)
+        if kw.get("steps") is not None:
+            kw["steps"] = np.asarray(kw["steps"], dtype=np.uint8)
         return cls(**kw)
 
     def __len__(self) -> int:
@@ -323,7 +332,7 @@ def encode_transitions(batch: TransitionBatch) -> bytes:
     return encode(Kind.TRANSITIONS, header, {
         "obs": batch.obs, "action": np.asarray(batch.action, np.int64), "reward": np.asarray(batch.reward, np.float32),
         "next_obs": batch.next_obs, "terminated": np.asarray(batch.terminated, np.uint8),
-        "truncated": np.asarray(batch.truncated, np.uint8)})
+        "truncated": np.asarray(batch.truncated, np.uint8), "steps": np.asarray(batch.steps, np.uint8)})
 
 
 def decode_transitions(data: bytes | bytearray | memoryview, schema: TransitionSchema) -> TransitionBatch:
@@ -340,7 +349,7 @@ def decode_transitions(data: bytes | bytearray | memoryview, schema: TransitionS
     if not isinstance(extra, dict):
         raise WireError("bad_header", "'extra' must be an object")
     a = msg.arrays
-    expected = {"obs", "action", "reward", "next_obs", "terminated", "truncated"}
+    expected = {"obs", "action", "reward", "next_obs", "terminated", "truncated", "steps"}
     if set(a) != expected:
         raise WireError("bad_arrays", f"arrays {sorted(a)} != {sorted(expected)}")
     rows = a["action"].shape[0] if a["action"].ndim == 1 else -1
@@ -351,7 +360,8 @@ def decode_transitions(data: bytes | bytearray | memoryview, schema: TransitionS
             raise WireError("bad_shape", f"{name} shape {a[name].shape} != {(rows, *schema.obs_shape)}")
         if a[name].dtype.str != schema.obs_dtype:
             raise WireError("bad_dtype", f"{name} dtype {a[name].dtype.str} != {schema.obs_dtype}")
-    for name, code in (("action", "<i8"), ("reward", "<f4"), ("terminated", "|u1"), ("truncated", "|u1")):
+    for name, code in (("action", "<i8"), ("reward", "<f4"), ("terminated", "|u1"), ("truncated", "|u1"),
+                       ("steps", "|u1")):
         if a[name].shape != (rows,):
             raise WireError("bad_shape", f"{name} shape {a[name].shape} != {(rows,)}")
         if a[name].dtype.str != code:
@@ -360,6 +370,8 @@ def decode_transitions(data: bytes | bytearray | memoryview, schema: TransitionS
         raise WireError("bad_value", f"action outside [0, {schema.n_actions})")
     if a["terminated"].max() > 1 or a["truncated"].max() > 1:
         raise WireError("bad_value", "terminated/truncated must be 0 or 1")
+    if a["steps"].min() < 1:
+        raise WireError("bad_value", "steps must be >= 1")
     for name in ("reward", "obs", "next_obs"):
         if a[name].dtype.kind == "f" and not np.isfinite(a[name]).all():
             raise WireError("non_finite", f"{name} contains NaN or inf")
@@ -501,6 +513,7 @@ class SampledBatch:
     reward: np.ndarray
     next_obs: np.ndarray
     terminated: np.ndarray
+    steps: np.ndarray  # rewards summed per row: the bootstrap is discounted by gamma ** steps
     is_demo: np.ndarray  # 1 where the row came from the demo shard
     index: np.ndarray  # item keys, for priority updates
     weight: np.ndarray  # importance-sampling weights (1 for uniform sampling)
@@ -508,7 +521,7 @@ class SampledBatch:
     info: dict = field(default_factory=dict)
 
 
-_BATCH_FIELDS = ("obs", "action", "reward", "next_obs", "terminated", "is_demo", "index", "weight")
+_BATCH_FIELDS = ("obs", "action", "reward", "next_obs", "terminated", "steps", "is_demo", "index", "weight")
 
 
 def encode_batch(batch: SampledBatch) -> bytes:
@@ -529,6 +542,9 @@ def decode_batch(data: bytes | bytearray | memoryview, schema: TransitionSchema)
     for name in _BATCH_FIELDS[1:]:
         if name not in ("next_obs",) and msg.arrays[name].shape != (rows,):
             raise WireError("bad_shape", f"batch {name} shape {msg.arrays[name].shape}")
+    steps = msg.arrays["steps"]
+    if steps.dtype.str != "|u1" or (rows and steps.min() < 1):
+        raise WireError("bad_value", "batch steps must be uint8 >= 1")
     nb = _require(msg.header, "num_batches", int)
     if nb < 1 or rows % nb:
         raise WireError("bad_header", f"{rows} rows do not split into {nb} batches")
