@@ -47,7 +47,7 @@ def _default_demo_episodes(cfg: RunConfig) -> int:
 
     if cfg.train.demo_episodes:
         return cfg.train.demo_episodes
-    need = cfg.replay.capacity * cfg.replay.demo_ratio if cfg.replay.demo_mode == "retention" else 2_000
+    need = cfg.replay.capacity * cfg.replay.demo_ratio if cfg.replay.retains_demos else 2_000
     probe = make_env(cfg.env)
     horizon = getattr(probe.unwrapped, "max_steps", None) or 100
     probe.close()

@@ -19,7 +19,7 @@ class RayEnvWorker:
         self.session = transport.open_session(cfg.transport)
         self.links = ZenohActorLinks(self.session, cfg.transport.run_id, name, cfg.transport.timeout_s)
         self.worker = EnvWorker(name, index, cfg.env, cfg.actor, cfg.learner.hidden,
-                                sync=cfg.train.parallel == "sync", rehearsal=cfg.replay.demo_mode == "rehearsal",
+                                sync=cfg.train.parallel == "sync", rehearsal=cfg.replay.pretrains,
                                 n_step=cfg.learner.n_step, gamma=cfg.learner.gamma)
 
     def run(self, env_steps: int) -> dict:

@@ -9,7 +9,8 @@ Cadence per parallel mode (MATLAB's parallel training options):
 
 Rehearsal (the paper's 予行型): phase 1 runs ``phase1_updates`` updates on the demo shard alone
 (actors wait), saves ``checkpoints/phase1.safetensors``, switches the replay server to phase 2 and
-starts a new training run from that network (fresh optimizer, target = online).
+starts a new training run from that network (fresh optimizer, target = online). ``dqfd`` has the
+same phase 1 (DQfD's pre-training); its phase 2 keeps the demo region in the buffer.
 
 Run it with ``laneshift learner --config run.yaml``.
 """
@@ -55,7 +56,7 @@ class Learner:
         self.metrics = MetricsLog(self.run_dir)
         self.metrics.hparams(cfg.to_dict())
         self.version = 0
-        self.phase = 1 if cfg.replay.demo_mode == "rehearsal" else 0
+        self.phase = 1 if cfg.replay.pretrains else 0
         # Running statistics for logs.
         self.returns: collections.deque[float] = collections.deque(maxlen=100)
         self.lengths: collections.deque[float] = collections.deque(maxlen=100)
@@ -135,7 +136,8 @@ class Learner:
         self.stop.wait(max(delay, 0.001))
 
     def _rehearsal_phase1(self) -> None:
-        print(f"learner: rehearsal phase 1: {self.lcfg.phase1_updates} updates on demos only", flush=True)
+        print(f"learner: {self.cfg.replay.demo_mode} phase 1: {self.lcfg.phase1_updates} updates on demos only",
+              flush=True)
         next_log = time.monotonic()
         while self.agent.updates < self.lcfg.phase1_updates and not self._should_stop():
             n = min(self.lcfg.prefetch, self.lcfg.phase1_updates - self.agent.updates)
@@ -155,7 +157,8 @@ class Learner:
         self.agent.reset_optimizer()
         self.phase, self.version = 2, self.version + 1
         self.publish()
-        print(f"learner: rehearsal phase 2 from the phase-1 network (version {self.version})", flush=True)
+        print(f"learner: {self.cfg.replay.demo_mode} phase 2 from the phase-1 network (version {self.version})",
+              flush=True)
 
     def _async_step(self) -> None:
         batch = self._fetch(wire.SampleRequest(self.lcfg.batch_size, self.lcfg.prefetch))

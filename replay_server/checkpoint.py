@@ -114,6 +114,6 @@ def restore_checkpoint(core: "ReplayCore", directory: str | Path) -> int:
             mine = table.actor[:n] == index
             if name in core.actors and mine.any():
                 core.actors[name]["last_seq"] = int(table.seq[:n][mine].max())
-        if core.mode == "rehearsal" and meta.get("mode") == "rehearsal":
+        if core.cfg.pretrains and meta.get("mode") == core.mode:
             core.phase = max(core.phase, int(meta.get("phase", core.phase)))
     return n

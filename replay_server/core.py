@@ -12,6 +12,8 @@ The paper's three demo modes decide what is sampled:
   so once the online part is full the demo share of batches equals ``demo_ratio``.
 - ``rehearsal``: phase 1 samples the whole demo shard only and stores no agent transitions;
   after ``set_phase(2)`` (sent by the learner) it is ordinary replay on the online table.
+- ``dqfd`` (beyond the paper, DQfD's pre-training): retention's buffer, with a phase 1 that
+  samples its demo region only and stores no agent transitions, like rehearsal's.
 
     >>> from laneshift.config import ReplayConfig
     >>> from laneshift.wire import TransitionSchema
@@ -51,11 +53,11 @@ class ReplayCore:
         held = demo if demo is not None else DemoTable.empty(schema.obs_shape, schema.obs_dtype)
         self.demo_held = held  # everything loaded, for stats and inspection
         online_capacity = cfg.capacity
-        if self.mode == "retention":
+        if cfg.retains_demos:
             want = round(cfg.demo_ratio * cfg.capacity)
             if held.size < want:
                 raise ValueError(
-                    f"replay.demo_ratio: retention needs {want} demo transitions ({cfg.demo_ratio:.0%} of "
+                    f"replay.demo_ratio: {self.mode} needs {want} demo transitions ({cfg.demo_ratio:.0%} of "
                     f"replay.capacity {cfg.capacity}) but the demo shard has {held.size}; record more demos "
                     f"or lower replay.capacity to {int(held.size / cfg.demo_ratio)}")
             # A fixed, seeded subset fills the demo region; it never changes during the run.
@@ -68,7 +70,7 @@ class ReplayCore:
             self.demo = held
         else:
             self.demo = DemoTable.empty(schema.obs_shape, schema.obs_dtype)
-        self.phase = 1 if self.mode == "rehearsal" else 0
+        self.phase = 1 if cfg.pretrains else 0
         self.online = RingTable(online_capacity, schema.obs_shape, schema.obs_dtype)
         self.limiter = SampleToInsertRatio(cfg.samples_per_insert, cfg.min_size, online_capacity,
                                            cfg.spi_tolerance)
@@ -129,9 +131,9 @@ class ReplayCore:
             stats["items"] += len(batch)
             stats["last_version"] = max(stats["last_version"], batch.weights_version)
             stats["env_steps"] = max(stats["env_steps"], batch.env_steps)
-            if self.mode == "rehearsal" and (self.phase == 1 or batch.phase == 1):
+            if self.cfg.pretrains and (self.phase == 1 or batch.phase == 1):
                 # Paper: in phase 1 the agent's own transitions are not stored.
-                self.dropped["rehearsal_phase1"] += len(batch)
+                self.dropped[f"{self.mode}_phase1"] += len(batch)
                 return None
             keys = self.online.insert(batch, self._actor_index[batch.actor])
             if self.tree is not None:  # new items get the highest priority seen: sampled at least once soon
@@ -169,7 +171,7 @@ class ReplayCore:
                                                samples=self.samples, rows=rows):
                     self.requests["rate_limited"] += 1
                     return _retry("rate_limited", f"online size {self.online.size}, min {self.limiter.min_size}", 5)
-                n_demo = self.demo.size if self.mode == "retention" else 0
+                n_demo = self.demo.size if self.cfg.retains_demos else 0
                 n_online = self.online.size
             if self.tree is not None:
                 leaves = self.tree.sample(self._rng, rows)
@@ -226,7 +228,7 @@ class ReplayCore:
             demo = update.is_demo.astype(bool)
             raw[demo] += cfg.demo_priority_bonus
             # Demo leaves are live only where the mode samples demos (retention, rehearsal phase 1).
-            demo_live = self.mode == "retention" or self.phase == 1
+            demo_live = self.cfg.retains_demos or self.phase == 1
             ok_demo = demo & (update.index < self.demo.size) & demo_live
             rows = update.index % self.online.capacity
             ok_online = ~demo & (self.online.key[rows] == update.index)  # not overwritten since sampled
@@ -263,12 +265,12 @@ class ReplayCore:
     # ------------------------------------------------------------------ control and stats
 
     def set_phase(self, phase: int) -> None:
-        if self.mode != "rehearsal" or phase not in (1, 2):
+        if not self.cfg.pretrains or phase not in (1, 2):
             raise ValueError(f"phase {phase} is not valid in demo_mode {self.mode}")
         with self._lock:
             if phase < self.phase:
                 raise ValueError("rehearsal phases only move forward")
-            if phase == 2 and self.tree is not None and self.demo.size:
+            if phase == 2 and self.tree is not None and self.demo.size and not self.cfg.retains_demos:
                 self.tree.set(np.arange(self.demo.size), np.zeros(self.demo.size))  # ordinary replay now
             self.phase = phase
 
@@ -294,7 +296,7 @@ class ReplayCore:
     def stats(self) -> dict[str, Any]:
         with self._lock:
             online_size = self.online.size
-            demo_in_buffer = self.demo.size if self.mode == "retention" or self.phase == 1 else 0
+            demo_in_buffer = self.demo.size if self.cfg.retains_demos or self.phase == 1 else 0
             total = online_size + demo_in_buffer
             recent_rows = sum(r for r, _ in self._recent)
             recent_demo = sum(d for _, d in self._recent)

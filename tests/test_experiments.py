@@ -34,4 +34,4 @@ def test_compare_runs_methods_and_seeds_and_writes_the_table(tmp_path):
         assert (tmp_path / "exp" / name).read_bytes()[:4] == b"\x89PNG"
     # dqfd really used the margin loss and retention with demos.
     cfg = (tmp_path / "exp" / "dqfd-s0" / "config.yaml").read_text()
-    assert "margin_loss_weight: 1.0" in cfg and "demo_mode: retention" in cfg
+    assert "margin_loss_weight: 1.0" in cfg and "demo_mode: dqfd" in cfg and "n_step: 10" in cfg

@@ -252,6 +252,25 @@ def test_rehearsal_phase2_demo_share_of_buffer_is_zero():
     assert core.stats()["demo_share_buffer"] == 0.0
 
 
+def test_dqfd_pretrains_on_its_demo_region_then_keeps_it_in_the_buffer():
+    """dqfd = rehearsal's phase 1 (demos only, agent items dropped) + retention's buffer in phase 2."""
+    core = make_core("dqfd", demo=200, capacity=1000, min_size=20)  # demo region: 10 % = 100 items
+    assert core.phase == 1 and core.demo.size == 100 and core.online.capacity == 900
+    b = sample_ok(core, SampleRequest(32, 2))
+    assert b.is_demo.all() and b.info["phase"] == 1
+    assert core.ingest(tmsg("w0", 0, rows=6), "w0") is None
+    assert core.online.inserted == 0 and core.stats()["dropped"] == {"dqfd_phase1": 6}
+    core.set_phase(2)
+    fill(core, 100, batch=10)
+    b = sample_ok(core, SampleRequest(500, 1))
+    # Uniform over 100 demo + 100 online items: about half the rows are demos.
+    assert 0.35 < b.is_demo.mean() < 0.65 and b.info["phase"] == 2
+    check_rows_traceable(core, b)
+    assert core.stats()["demo_share_buffer"] == 0.5
+    with pytest.raises(ValueError, match="forward"):
+        core.set_phase(1)
+
+
 def test_rehearsal_needs_demos():
     with pytest.raises(ValueError, match="replay.demo_paths"):
         make_core("rehearsal", demo=0)

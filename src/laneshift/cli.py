@@ -60,7 +60,8 @@ def _add_train(sub: argparse._SubParsersAction) -> None:
     where.add_argument("--cluster", metavar="ADDRESS", help="a running Ray cluster, e.g. ray://head:10001 or auto")
     p.add_argument("--workers", type=int, help="env workers (Ray actors)")
     p.add_argument("--scenario", help="straight | merge | curve | roundabout | lka")
-    p.add_argument("--mode", choices=["none", "retention", "rehearsal"], help="how demos are used (paper)")
+    p.add_argument("--mode", choices=["none", "retention", "rehearsal", "dqfd"],
+                   help="how demos are used (the paper's three, or dqfd: pre-training then retention)")
     p.add_argument("--parallel", choices=["async", "sync"], help="MATLAB parallel training mode")
     p.add_argument("--env-steps", help="total env-step budget over all workers")
     p.add_argument("--observation", choices=["vector", "grayscale"])

@@ -122,13 +122,18 @@ class ActorConfig:
         _check(self.seed >= 0, "actor.seed", "must be >= 0", self.seed)
 
 
+DEMO_MODES = ("none", "retention", "rehearsal", "dqfd")
+
+
 @dataclass(frozen=True)
 class ReplayConfig:
     """The replay server: tables, demo mode and rate limiting."""
 
     capacity: int = 100_000  # total items, demo region included (retention)
-    demo_mode: str = "none"  # none | retention | rehearsal (the paper's three)
-    demo_ratio: float = 0.1  # retention: share of the buffer that is demos, never evicted
+    # none | retention | rehearsal (the paper's three) | dqfd (beyond the paper, Hester et al. 2018:
+    # rehearsal's demo-only phase 1, then retention's fixed demo region in phase 2)
+    demo_mode: str = "none"
+    demo_ratio: float = 0.1  # retention/dqfd: share of the buffer that is demos, never evicted
     # Demo shards (Minari datasets) loaded at start. Empty with a demo mode: `train` generates the
     # scripted demonstrator's shard; a bare replay server refuses to start.
     demo_paths: tuple[str, ...] = ()
@@ -161,8 +166,8 @@ class ReplayConfig:
                self.http_port)
         _check(self.checkpoint_every_s >= 0, "replay.checkpoint_every_s", "must be >= 0", self.checkpoint_every_s)
         _check(self.capacity >= 2, "replay.capacity", "must be >= 2", self.capacity)
-        _check(self.demo_mode in ("none", "retention", "rehearsal"), "replay.demo_mode",
-               "must be none, retention or rehearsal", self.demo_mode)
+        _check(self.demo_mode in DEMO_MODES, "replay.demo_mode", "must be none, retention, rehearsal or dqfd",
+               self.demo_mode)
         _check(0.0 < self.demo_ratio < 1.0, "replay.demo_ratio", "must be in (0, 1)", self.demo_ratio)
         _check(self.min_size >= 1, "replay.min_size", "must be >= 1", self.min_size)
         _check(self.min_size <= self.capacity, "replay.min_size", f"must be <= replay.capacity ({self.capacity}) "
@@ -170,6 +175,16 @@ class ReplayConfig:
         _check(self.samples_per_insert >= 0, "replay.samples_per_insert", "must be >= 0", self.samples_per_insert)
         _check(self.spi_tolerance >= 0, "replay.spi_tolerance", "must be >= 0", self.spi_tolerance)
         _check(self.seed >= 0, "replay.seed", "must be >= 0", self.seed)
+
+    @property
+    def retains_demos(self) -> bool:
+        """Demos are a fixed region of the buffer while the agent learns online."""
+        return self.demo_mode in ("retention", "dqfd")
+
+    @property
+    def pretrains(self) -> bool:
+        """A phase 1 of demo-only updates (agent transitions not stored) comes first."""
+        return self.demo_mode in ("rehearsal", "dqfd")
 
 
 @dataclass(frozen=True)

@@ -8,8 +8,9 @@ seeds. Rates are pooled over seeds (Wilson 95 % intervals over all evaluation ep
     laneshift experiment compare --scenario straight --methods none,retention,rehearsal,dqfd \\
         --seeds 0,1,2 --env-steps 150000 --eval-episodes 200 --out runs/exp-table2
 
-Methods: ``none``, ``retention``, ``rehearsal`` (the paper), ``dqfd`` (beyond the paper: retention
-plus DQfD's large-margin loss on demo rows). Writes ``results.json``, ``table.md`` and
+Methods: ``none``, ``retention``, ``rehearsal`` (the paper), ``dqfd`` (beyond the paper: a
+demo-only pre-training phase, then retention, with DQfD's large-margin loss on demo rows and
+10-step returns). Writes ``results.json``, ``table.md`` and
 ``curves_episodes.png`` / ``curves_wallclock.png`` (moving-average return and episode length).
 """
 
@@ -31,7 +32,11 @@ METHODS: dict[str, dict[str, Any]] = {
     "none": {"replay.demo_mode": "none"},
     "retention": {"replay.demo_mode": "retention"},
     "rehearsal": {"replay.demo_mode": "rehearsal"},
-    "dqfd": {"replay.demo_mode": "retention", "learner.margin_loss_weight": 1.0},
+    # DQfD (Hester et al. 2018): pre-training on demos, demos kept in the buffer, large-margin loss
+    # on demo rows, n-step returns.
+    # Phase 2 explores from epsilon 0.3: the pre-trained network already drives.
+    "dqfd": {"replay.demo_mode": "dqfd", "learner.margin_loss_weight": 1.0, "learner.n_step": 10,
+             "actor.phase2_epsilon_start": 0.3},
 }
 INITIAL_LANES = ("random", "non-target")
 
