@@ -4,7 +4,8 @@
     >>> agent = DoubleDQN((4,), 2, LearnerConfig(hidden=(16,), batch_size=8))
     >>> import numpy as np
     >>> b = dict(obs=np.zeros((8, 4), np.float32), action=np.zeros(8, np.int64), reward=np.ones(8, np.float32),
-    ...          next_obs=np.zeros((8, 4), np.float32), terminated=np.ones(8, np.uint8), weight=np.ones(8, np.float32))
+    ...          next_obs=np.zeros((8, 4), np.float32), terminated=np.ones(8, np.uint8), steps=np.ones(8, np.uint8),
+    ...          weight=np.ones(8, np.float32))
     >>> round(agent.update(b)["loss"], 3) > 0
     True
 """
@@ -44,8 +45,9 @@ class DoubleDQN:
         reward = torch.as_tensor(batch["reward"], dtype=torch.float32)
         next_obs = torch.as_tensor(batch["next_obs"])
         not_done = 1.0 - torch.as_tensor(batch["terminated"], dtype=torch.float32)
-        # n-step items (laneshift.nstep) sum `steps` rewards: bootstrap with gamma ** steps.
-        steps = torch.as_tensor(batch.get("steps", np.ones(len(reward), np.uint8)), dtype=torch.float32)
+        # n-step items (laneshift.nstep) sum `steps` rewards: bootstrap with gamma ** steps. Required:
+        # a silent default of 1 would bootstrap n-step returns with gamma and blow the values up.
+        steps = torch.as_tensor(batch["steps"], dtype=torch.float32)
         weight = torch.as_tensor(batch.get("weight", np.ones(len(reward), np.float32)), dtype=torch.float32)
 
         # Q(s, a) of the actions taken.

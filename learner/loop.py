@@ -251,9 +251,13 @@ class Learner:
         self.metrics.scalars(self.agent.updates, flat)
 
 
+#: The per-row fields of a sampled batch that DoubleDQN.update reads.
+UPDATE_FIELDS = ("obs", "action", "reward", "next_obs", "terminated", "steps", "weight", "is_demo")
+
+
 def _split(batch: wire.SampledBatch) -> list[dict[str, np.ndarray]]:
     parts = {k: np.split(getattr(batch, k), batch.num_batches)
-             for k in ("obs", "action", "reward", "next_obs", "terminated", "weight", "is_demo")}
+             for k in UPDATE_FIELDS}
     return [{k: v[i] for k, v in parts.items()} for i in range(batch.num_batches)]
 
 

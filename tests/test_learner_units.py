@@ -40,7 +40,8 @@ def _set_constant_q(net: torch.nn.Module, values: list[float]) -> None:
 def _batch(obs, action, reward, next_obs, terminated) -> dict[str, np.ndarray]:
     return {"obs": np.asarray(obs, np.float32), "action": np.asarray(action, np.int64),
             "reward": np.asarray(reward, np.float32), "next_obs": np.asarray(next_obs, np.float32),
-            "terminated": np.asarray(terminated, np.uint8), "weight": np.ones(len(action), np.float32)}
+            "terminated": np.asarray(terminated, np.uint8), "steps": np.ones(len(action), np.uint8),
+            "weight": np.ones(len(action), np.float32)}
 
 
 # --------------------------------------------------------------------------- Double DQN
@@ -309,7 +310,8 @@ def test_margin_loss_makes_the_demonstrators_action_greedy_on_demo_rows():
     obs = rng.normal(size=(64, 4)).astype(np.float32)
     expert = (obs[:, 0] > 0).astype(np.int64) * 2  # the demonstrator's rule: action 2 if x0 > 0 else 0
     batch = {"obs": obs, "action": expert, "reward": np.zeros(64, np.float32), "next_obs": obs,
-             "terminated": np.ones(64, np.uint8), "weight": np.ones(64, np.float32), "is_demo": np.ones(64, np.uint8)}
+             "terminated": np.ones(64, np.uint8), "steps": np.ones(64, np.uint8), "weight": np.ones(64, np.float32),
+             "is_demo": np.ones(64, np.uint8)}
     off = DoubleDQN((4,), 3, LearnerConfig(hidden=(32,), lr=1e-2, seed=1))
     on = DoubleDQN((4,), 3, LearnerConfig(hidden=(32,), lr=1e-2, seed=1, margin_loss_weight=1.0))
     for _ in range(300):

@@ -171,3 +171,33 @@ def test_worker_sends_the_n_step_items_of_its_one_step_trajectory():
     np.testing.assert_array_equal(three["terminated"], term)
     np.testing.assert_array_equal(three["steps"], steps)
     assert set(steps.tolist()) == {1, 2, 3} and sizes[0] == 16 - 2  # the first window completes at step 3
+
+
+def test_the_learner_hands_every_row_field_the_update_reads_to_the_agent():
+    """A sampled batch split into updates keeps `steps` (a lost column would silently bootstrap
+    n-step returns with gamma instead of gamma^n)."""
+    from laneshift import wire
+    from laneshift.learner.loop import UPDATE_FIELDS, _split
+
+    n = 6
+    rows = {"obs": np.zeros((n, 2), np.float32), "next_obs": np.zeros((n, 2), np.float32),
+            "action": np.zeros(n, np.int64), "reward": np.zeros(n, np.float32), "terminated": np.zeros(n, np.uint8),
+            "steps": np.arange(1, n + 1, dtype=np.uint8), "is_demo": np.zeros(n, np.uint8),
+            "index": np.arange(n, dtype=np.int64), "weight": np.ones(n, np.float32)}
+    parts = _split(wire.SampledBatch(num_batches=2, **rows))
+    assert set(UPDATE_FIELDS) <= set(parts[0]) and "steps" in UPDATE_FIELDS
+    assert parts[1]["steps"].tolist() == [4, 5, 6]
+
+
+def test_n_step_run_in_process(tmp_path):
+    """The whole graph (workers, replay core, learner) with 3-step items."""
+    from laneshift.config import load_run_config
+    from laneshift.deploy.inprocess import train_inprocess
+
+    cfg = load_run_config(overrides={
+        "env.scenario": "lka", "actor.send_every": 50, "learner.hidden": "32,32", "learner.batch_size": 32,
+        "learner.publish_every": 5, "learner.n_step": 3, "replay.min_size": 100, "replay.samples_per_insert": 4,
+        "replay.spi_tolerance": 512, "train.env_steps": 1000, "train.run_dir": str(tmp_path)})
+    result = train_inprocess(cfg)
+    assert result["replay"]["tables"]["online"]["inserted"] == 1000  # one item per env step
+    assert result["updates"] > 0 and result["replay"]["rejected"] == {}
