@@ -78,7 +78,8 @@ class Learner:
         meta = {"version": self.version, "updates": self.agent.updates, "phase": self.phase,
                 "env_id": self.spec.env_id, "obs_shape": ",".join(map(str, self.spec.schema.obs_shape)),
                 "obs_dtype": self.spec.schema.obs_dtype, "n_actions": self.spec.schema.n_actions,
-                "hidden": ",".join(map(str, self.lcfg.hidden))}
+                "hidden": ",".join(map(str, self.lcfg.hidden)),
+                "env_steps": sum(self.actor_steps.values()), "elapsed_s": round(time.monotonic() - self.started, 1)}
         return save_checkpoint(self.agent.online, self.run_dir / "checkpoints" / f"{name}.safetensors", meta)
 
     # ------------------------------------------------------------------ main loop
@@ -118,6 +119,8 @@ class Learner:
             self.last_update = metrics
             if self.agent.updates % self.lcfg.checkpoint_every == 0:
                 self.checkpoint("latest")
+                if self.lcfg.keep_checkpoints:
+                    self.checkpoint(f"u{self.agent.updates:08d}")
         if batch.info.get("prioritized"):
             self.links.send_priorities(wire.encode_priorities(wire.PriorityUpdate(
                 index=batch.index, is_demo=batch.is_demo, priority=np.concatenate(td_abs).astype(np.float32))))

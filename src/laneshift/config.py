@@ -211,6 +211,9 @@ class LearnerConfig:
     updates_per_round: int = 8  # sync: updates per round of worker batches
     phase1_updates: int = 2_000  # rehearsal: demo-only updates before phase 2
     checkpoint_every: int = 5_000  # updates between checkpoints in the run dir
+    # Also keep each periodic checkpoint as checkpoints/u<updates>.safetensors (learning curves of
+    # greedy scores: `laneshift experiment checkpoints`); off: only latest/final are kept.
+    keep_checkpoints: bool = False
     prefetch: int = 4  # batches per sample request (one round trip, several updates)
     torch_threads: int = 1
     seed: int = 0

@@ -32,10 +32,11 @@ METHODS: dict[str, dict[str, Any]] = {
     "none": {"replay.demo_mode": "none"},
     "retention": {"replay.demo_mode": "retention"},
     "rehearsal": {"replay.demo_mode": "rehearsal"},
-    # DQfD (Hester et al. 2018): pre-training on demos, demos kept in the buffer, large-margin loss
-    # on demo rows, n-step returns.
-    # Phase 2 explores from epsilon 0.3: the pre-trained network already drives.
+    # DQfD (Hester et al. 2018): pre-training on demos (20,000 updates), demos kept in the buffer
+    # (30 % of 300,000 items, i.e. about 300 scripted episodes), large-margin loss on demo rows,
+    # 10-step returns. Phase 2 explores from epsilon 0.3: the pre-trained network already drives.
     "dqfd": {"replay.demo_mode": "dqfd", "learner.margin_loss_weight": 1.0, "learner.n_step": 10,
+             "learner.phase1_updates": 20_000, "replay.capacity": 300_000, "replay.demo_ratio": 0.3,
              "actor.phase2_epsilon_start": 0.3},
 }
 INITIAL_LANES = ("random", "non-target")

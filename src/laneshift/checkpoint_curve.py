@@ -1,0 +1,88 @@
+"""Greedy scores of every kept checkpoint of a run: the learning curve the final number hides.
+
+A run trained with ``--set learner.keep_checkpoints=true`` keeps ``checkpoints/u<updates>.safetensors``
+every ``learner.checkpoint_every`` updates, each with the env steps and seconds of training it
+had behind it. This evaluates each one on the same greedy episodes, so the output answers "how
+many env steps / how much wall time until X % achievement" (the issue's 80 % question) and shows
+where the policy peaked.
+
+    laneshift experiment checkpoints --run-dir runs/exp/dqfd-s0 --episodes 50 --json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from .config import EnvConfig, load_run_config
+from .evaluate import evaluate_policy, load_greedy_policy
+
+
+def kept_checkpoints(run_dir: str | Path) -> list[Path]:
+    """The run's periodic checkpoints, oldest first (then final.safetensors, if present)."""
+    ckpts = sorted((Path(run_dir) / "checkpoints").glob("u*.safetensors"))
+    final = Path(run_dir) / "checkpoints" / "final.safetensors"
+    return ckpts + ([final] if final.exists() else [])
+
+
+def evaluate_checkpoints(run_dir: str | Path, env: EnvConfig, episodes: int, seed: int,
+                         initial_lanes: tuple[str, ...] = ("random",)) -> list[dict]:
+    from .learner.weights import load_checkpoint
+
+    rows = []
+    for path in kept_checkpoints(run_dir):
+        _, meta = load_checkpoint(path)
+        greedy = load_greedy_policy(path)
+        row = {"checkpoint": path.name, "updates": int(meta.get("updates", 0)),
+               "env_steps": int(meta.get("env_steps", 0)), "elapsed_s": float(meta.get("elapsed_s", 0.0))}
+        for lane in initial_lanes:
+            cfg = EnvConfig(**{**env.__dict__, "initial_lane": lane})
+            r = evaluate_policy(lambda _env: greedy, cfg, episodes, seed)
+            row[lane] = {k: r[k] for k in ("survival_rate", "achievement_rate", "survival_ci95",
+                                           "achievement_ci95", "return_mean") if k in r}  # LKA: no achievement
+        rows.append(row)
+    return rows
+
+
+def first_reaching(rows: list[dict], lane: str, key: str, level: float) -> dict | None:
+    """The first checkpoint whose ``key`` rate on ``lane`` is at least ``level``."""
+    return next((r for r in rows if r[lane].get(key, -1.0) >= level), None)
+
+
+def render(rows: list[dict], lanes: tuple[str, ...]) -> str:
+    head = "| checkpoint | updates | env steps | train s | " + " | ".join(
+        f"{lane} survival | {lane} achievement" for lane in lanes) + " |"
+    lines = [head, "|" + "---|" * (4 + 2 * len(lanes))]
+    for r in rows:
+        cells = [r["checkpoint"], f"{r['updates']:,}", f"{r['env_steps']:,}", f"{r['elapsed_s']:.0f}"]
+        for lane in lanes:
+            ach = r[lane].get("achievement_rate")
+            cells += [f"{r[lane]['survival_rate']:.0%}", "-" if ach is None else f"{ach:.0%}"]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _run(args: argparse.Namespace) -> int:
+    run_dir = Path(args.run_dir)
+    cfg = load_run_config(run_dir / "config.yaml")
+    lanes = tuple(x for x in args.initial_lanes.split(",") if x)
+    rows = evaluate_checkpoints(run_dir, cfg.env, args.episodes, args.seed, lanes)
+    if not rows:
+        print(f"no checkpoints in {run_dir / 'checkpoints'}")
+        return 1
+    out = {"run_dir": str(run_dir), "episodes": args.episodes, "seed": args.seed, "rows": rows,
+           "first_80pct_achievement": {lane: first_reaching(rows, lane, "achievement_rate", 0.8) for lane in lanes}}
+    (run_dir / "checkpoint_curve.json").write_text(json.dumps(out, indent=2))
+    print(json.dumps(out) if args.json else render(rows, lanes))
+    return 0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("checkpoints", help="greedy scores of every kept checkpoint of a run")
+    p.add_argument("--run-dir", required=True)
+    p.add_argument("--episodes", type=int, default=50, help="greedy episodes per checkpoint and initial lane")
+    p.add_argument("--initial-lanes", default="random,non-target")
+    p.add_argument("--seed", type=int, default=200_000, help="evaluation episode seeds (not the test seeds)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_run)

@@ -1,0 +1,41 @@
+"""Learning curves from kept checkpoints, and the stable-baselines3 baseline on our env."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from laneshift.checkpoint_curve import evaluate_checkpoints, first_reaching, kept_checkpoints, render
+from laneshift.config import EnvConfig, load_run_config
+from laneshift.deploy.inprocess import train_inprocess
+
+
+def test_kept_checkpoints_carry_their_training_budget_and_are_scored(tmp_path):
+    cfg = load_run_config(overrides={
+        "env.scenario": "lka", "actor.send_every": 50, "learner.hidden": "32,32", "learner.batch_size": 32,
+        "learner.publish_every": 5, "learner.checkpoint_every": 50, "learner.keep_checkpoints": True,
+        "replay.min_size": 100, "replay.samples_per_insert": 8, "replay.spi_tolerance": 512,
+        "train.env_steps": 1500, "train.run_dir": str(tmp_path)})
+    result = train_inprocess(cfg)
+    paths = kept_checkpoints(tmp_path)
+    assert len(paths) == result["updates"] // 50 + 1 and paths[-1].name == "final.safetensors"
+    rows = evaluate_checkpoints(tmp_path, EnvConfig(scenario="lka"), episodes=2, seed=7)
+    updates = [r["updates"] for r in rows[:-1]]
+    assert updates == sorted(updates) and updates[0] == 50
+    assert all(0.0 <= r["random"]["survival_rate"] <= 1.0 for r in rows)
+    assert "| u00000050.safetensors | 50 |" in render(rows, ("random",))
+    assert first_reaching(rows, "random", "survival_rate", 2.0) is None
+
+
+def test_sb3_dqn_trains_on_the_laneshift_env_and_reports_a_curve(tmp_path, capsys):
+    pytest.importorskip("stable_baselines3")  # optional extra [baselines]; `make` installs it
+    from laneshift.sb3_baseline import train_sb3
+
+    res = train_sb3(EnvConfig(scenario="straight", max_steps=50), env_steps=400, eval_every=200, eval_episodes=2,
+                    seed=0, eval_seed=5, out=tmp_path)
+    assert [row["env_steps"] for row in res["curve"]] == [200, 400]
+    assert set(res["curve"][0]) >= {"random", "non-target", "train_s"}
+    saved = json.loads((tmp_path / "results.json").read_text())
+    assert saved["algorithm"] == "DQN" and saved["net_arch"] == [256, 256]
+    assert (tmp_path / "sb3_dqn.zip").exists()
