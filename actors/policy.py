@@ -17,8 +17,9 @@ from laneshift.learner.weights import load_into
 
 
 class QPolicy:
-    def __init__(self, obs_shape: tuple[int, ...], n_actions: int, hidden: tuple[int, ...], seed: int = 0):
-        self.net = build_q_network(obs_shape, n_actions, hidden).eval()
+    def __init__(self, obs_shape: tuple[int, ...], n_actions: int, hidden: tuple[int, ...], seed: int = 0,
+                 dueling: bool = False):
+        self.net = build_q_network(obs_shape, n_actions, hidden, dueling).eval()
         self.n_actions = n_actions
         self.rng = np.random.default_rng(seed)
         self.version = -1

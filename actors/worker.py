@@ -62,7 +62,8 @@ class WorkerSummary:
 
 class EnvWorker:
     def __init__(self, name: str, index: int, env_cfg: EnvConfig, actor_cfg: ActorConfig,
-                 hidden: tuple[int, ...], sync: bool, rehearsal: bool, n_step: int = 1, gamma: float = 0.99):
+                 hidden: tuple[int, ...], sync: bool, rehearsal: bool, n_step: int = 1, gamma: float = 0.99,
+                 dueling: bool = False):
         torch.set_num_threads(actor_cfg.torch_threads)
         self.name, self.index, self.cfg = name, index, actor_cfg
         self.sync, self.rehearsal = sync, rehearsal
@@ -71,7 +72,7 @@ class EnvWorker:
         NStepAccumulator(n_step, gamma)  # refuses a bad n or gamma here, not mid-run
         space = self.envs[0].observation_space
         self.policy = QPolicy(tuple(space.shape), int(self.envs[0].action_space.n), hidden,
-                              seed=actor_cfg.seed + 7919 * index)
+                              seed=actor_cfg.seed + 7919 * index, dueling=dueling)
         self.uses_policy_vehicles = env_cfg.policy_vehicles > 0
         self.bad_weights = 0
         self.weight_updates = 0

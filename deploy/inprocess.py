@@ -123,7 +123,7 @@ def train_inprocess(cfg: RunConfig) -> dict:
     def work(i: int, name: str) -> None:
         worker = EnvWorker(name, i, cfg.env, cfg.actor, cfg.learner.hidden, sync=cfg.train.parallel == "sync",
                            rehearsal=cfg.replay.pretrains, n_step=cfg.learner.n_step,
-                           gamma=cfg.learner.gamma)
+                           gamma=cfg.learner.gamma, dueling=cfg.learner.dueling)
         try:
             summaries[name] = worker.run(InProcessActorLinks(board, name), share[i]).as_dict()
         finally:

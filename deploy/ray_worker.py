@@ -20,7 +20,7 @@ class RayEnvWorker:
         self.links = ZenohActorLinks(self.session, cfg.transport.run_id, name, cfg.transport.timeout_s)
         self.worker = EnvWorker(name, index, cfg.env, cfg.actor, cfg.learner.hidden,
                                 sync=cfg.train.parallel == "sync", rehearsal=cfg.replay.pretrains,
-                                n_step=cfg.learner.n_step, gamma=cfg.learner.gamma)
+                                n_step=cfg.learner.n_step, gamma=cfg.learner.gamma, dueling=cfg.learner.dueling)
 
     def run(self, env_steps: int) -> dict:
         return self.worker.run(self.links, env_steps).as_dict()

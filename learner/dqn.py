@@ -28,7 +28,7 @@ class DoubleDQN:
     def __init__(self, obs_shape: tuple[int, ...], n_actions: int, cfg: LearnerConfig):
         torch.manual_seed(cfg.seed)
         self.cfg = cfg
-        self.online = build_q_network(obs_shape, n_actions, cfg.hidden)
+        self.online = build_q_network(obs_shape, n_actions, cfg.hidden, cfg.dueling)
         self.target = copy.deepcopy(self.online).requires_grad_(False)
         self.updates = 0
         self.reset_optimizer()
@@ -71,6 +71,16 @@ class DoubleDQN:
                 penalty.scatter_(1, action[demo][:, None], 0.0)
                 margin_loss = ((qd + penalty).max(dim=1).values - q[demo]).mean()
                 loss = loss + self.cfg.margin_loss_weight * margin_loss
+        bc_loss = torch.zeros(())
+        if self.cfg.bc_loss_weight > 0 and "is_demo" in batch:
+            # Supervised imitation: cross-entropy of softmax(Q(s, .)) against the demonstrator's
+            # action on demo rows. Unlike the margin (a fixed 0.8 at Q-values near 100), it keeps
+            # pushing until the demo action clearly leads, which is what makes the small action
+            # gaps of 10 Hz control follow the demonstrator (docs/RESULTS.md).
+            demo = torch.as_tensor(batch["is_demo"], dtype=torch.bool)
+            if demo.any():
+                bc_loss = F.cross_entropy(q_all[demo], action[demo])
+                loss = loss + self.cfg.bc_loss_weight * bc_loss
 
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
@@ -83,7 +93,8 @@ class DoubleDQN:
         # Per-item |TD error|: the new priorities when the replay samples by priority.
         self.last_td_abs = td_error.detach().abs().numpy()
         return {"loss": float(loss.detach()), "q_mean": float(q.detach().mean()), "grad_norm": float(grad_norm),
-                "td_abs": float(self.last_td_abs.mean()), "margin_loss": float(margin_loss.detach())}
+                "td_abs": float(self.last_td_abs.mean()), "margin_loss": float(margin_loss.detach()),
+                "bc_loss": float(bc_loss.detach())}
 
     @torch.no_grad()
     def greedy(self, obs: np.ndarray) -> np.ndarray:

@@ -78,7 +78,7 @@ class Learner:
         meta = {"version": self.version, "updates": self.agent.updates, "phase": self.phase,
                 "env_id": self.spec.env_id, "obs_shape": ",".join(map(str, self.spec.schema.obs_shape)),
                 "obs_dtype": self.spec.schema.obs_dtype, "n_actions": self.spec.schema.n_actions,
-                "hidden": ",".join(map(str, self.lcfg.hidden)),
+                "hidden": ",".join(map(str, self.lcfg.hidden)), "dueling": int(self.lcfg.dueling),
                 "env_steps": sum(self.actor_steps.values()), "elapsed_s": round(time.monotonic() - self.started, 1)}
         return save_checkpoint(self.agent.online, self.run_dir / "checkpoints" / f"{name}.safetensors", meta)
 

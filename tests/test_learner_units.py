@@ -323,3 +323,38 @@ def test_margin_loss_makes_the_demonstrators_action_greedy_on_demo_rows():
     # Agent rows are unaffected by the margin term.
     agent = {**batch, "is_demo": np.zeros(64, np.uint8)}
     assert on.update(agent)["margin_loss"] == 0.0
+
+
+def test_cross_entropy_on_demo_rows_teaches_the_demonstrators_action_through_a_dueling_head():
+    from laneshift.config import LearnerConfig
+    from laneshift.learner.dqn import DoubleDQN
+
+    rng = np.random.default_rng(1)
+    obs = rng.normal(size=(64, 4)).astype(np.float32)
+    expert = (obs[:, 1] > 0).astype(np.int64)  # action 1 if x1 > 0 else 0
+    batch = {"obs": obs, "action": expert, "reward": np.zeros(64, np.float32), "next_obs": obs,
+             "terminated": np.ones(64, np.uint8), "steps": np.ones(64, np.uint8), "weight": np.ones(64, np.float32),
+             "is_demo": np.ones(64, np.uint8)}
+    agent = DoubleDQN((4,), 3, LearnerConfig(hidden=(32,), lr=1e-2, seed=1, bc_loss_weight=1.0, dueling=True))
+    for _ in range(300):
+        metrics = agent.update(batch)
+    assert (agent.greedy(obs) == expert).mean() == 1.0
+    assert metrics["bc_loss"] < 0.1 and metrics["margin_loss"] == 0.0
+    # Rows not from the demos get no imitation term.
+    plain = DoubleDQN((4,), 3, LearnerConfig(hidden=(32,), seed=1, bc_loss_weight=1.0, dueling=True))
+    assert plain.update({**batch, "is_demo": np.zeros(64, np.uint8)})["bc_loss"] == 0.0
+
+
+def test_dueling_checkpoints_load_back_as_dueling_policies(tmp_path):
+    from laneshift.evaluate import load_greedy_policy
+    from laneshift.learner.networks import DuelingHead, build_q_network
+    from laneshift.learner.weights import save_checkpoint
+
+    net = build_q_network((5,), 9, (16,), dueling=True)
+    assert isinstance(net.net[-1], DuelingHead)
+    path = save_checkpoint(net, tmp_path / "d.safetensors", {"obs_shape": "5", "hidden": "16", "n_actions": 9,
+                                                             "dueling": 1})
+    greedy = load_greedy_policy(path)
+    obs = np.random.default_rng(0).normal(size=5).astype(np.float32)
+    with torch.no_grad():
+        assert greedy(obs) == int(net(torch.as_tensor(obs)[None]).argmax())

@@ -51,6 +51,8 @@ class EnvConfig:
     initial_lane: str = "random"  # random | non-target
     action_set: str = "paper"  # paper (9 actions) | meta (highway-env meta-actions)
     policy_vehicles: int = 0  # other vehicles driven by a copy of the agent's policy
+    # Per-lane gap features in the vector observation (False: the earlier 11 + 7 K layout).
+    lane_features: bool = True
 
     def __post_init__(self) -> None:
         _check(self.scenario in SCENARIO_NAMES or "/" in self.scenario, "env.scenario",
@@ -78,6 +80,8 @@ class EnvConfig:
             kw["max_steps"] = self.max_steps
         if self.policy_vehicles:
             kw["policy_vehicles"] = self.policy_vehicles
+        if not self.lane_features:
+            kw["lane_features"] = False
         return kw
 
 
@@ -207,6 +211,9 @@ class LearnerConfig:
     # - Q(s,a_E)), pushing the demonstrator's action above the others by a margin. 0 = off.
     margin_loss_weight: float = 0.0
     margin: float = 0.8
+    # Supervised imitation on demo rows: cross-entropy of softmax(Q(s, .)) against the demo action. 0 = off.
+    bc_loss_weight: float = 0.0
+    dueling: bool = False  # dueling head (Wang et al. 2016): Q = V + A - mean A
     publish_every: int = 50  # updates between weight broadcasts (async)
     updates_per_round: int = 8  # sync: updates per round of worker batches
     phase1_updates: int = 2_000  # rehearsal: demo-only updates before phase 2
@@ -235,6 +242,7 @@ class LearnerConfig:
         _check(self.weight_decay >= 0, "learner.weight_decay", "must be >= 0", self.weight_decay)
         _check(self.margin_loss_weight >= 0, "learner.margin_loss_weight", "must be >= 0", self.margin_loss_weight)
         _check(self.margin >= 0, "learner.margin", "must be >= 0", self.margin)
+        _check(self.bc_loss_weight >= 0, "learner.bc_loss_weight", "must be >= 0", self.bc_loss_weight)
         _check(self.seed >= 0, "learner.seed", "must be >= 0", self.seed)
 
 

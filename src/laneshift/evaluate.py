@@ -79,7 +79,7 @@ def load_greedy_policy(checkpoint: str | Path) -> Callable[[np.ndarray], int]:
         n_actions = int(meta["n_actions"])
     except (KeyError, ValueError):
         raise ValueError(f"checkpoint {checkpoint}: missing laneshift metadata (obs_shape, hidden, n_actions)") from None
-    policy = QPolicy(obs_shape, n_actions, hidden)
+    policy = QPolicy(obs_shape, n_actions, hidden, dueling=meta.get("dueling", "0") == "1")
     load_into(policy.net, tensors)
     return lambda obs: int(policy.greedy(np.asarray(obs)[None])[0])
 
