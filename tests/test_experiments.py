@@ -15,7 +15,9 @@ def test_compare_runs_methods_and_seeds_and_writes_the_table(tmp_path):
         "compare", "--scenario", "straight", "--methods", "none,dqfd", "--seeds", "0", "--env-steps", "1200",
         "--eval-episodes", "3", "--eval-max-steps", "40", "--out", str(tmp_path / "exp"),
         "--set", "replay.capacity=2000", "--set", "replay.min_size=200", "--set", "learner.hidden=32",
-        "--set", "learner.batch_size=32", "--set", "replay.spi_tolerance=1024"])
+        "--set", "learner.batch_size=32", "--set", "replay.spi_tolerance=1024",
+        # --set wins over the method's own settings (dqfd's 300,000-item buffer, 20,000 pre-training updates).
+        "--set", "replay.demo_ratio=0.1", "--set", "learner.phase1_updates=100"])
     assert args.func(args) == 0
     results = json.loads((tmp_path / "exp" / "results.json").read_text())
     assert set(results["methods"]) == {"none", "dqfd"}
@@ -35,3 +37,29 @@ def test_compare_runs_methods_and_seeds_and_writes_the_table(tmp_path):
     # dqfd really used the margin loss and retention with demos.
     cfg = (tmp_path / "exp" / "dqfd-s0" / "config.yaml").read_text()
     assert "margin_loss_weight: 1.0" in cfg and "demo_mode: dqfd" in cfg and "n_step: 10" in cfg
+
+
+def test_reward_presets_study_trains_each_condition_with_its_own_exploration(tmp_path):
+    from laneshift.config import load_run_config
+    from laneshift.reward_study import preset_overrides
+    from laneshift.reward_study import register as register_presets
+
+    # Table 1: condition 1 explores 1.0 -> 0.3, condition 5 1.0 -> 0.1.
+    assert load_run_config(overrides=preset_overrides(1)).actor.epsilon_final == 0.3
+    assert load_run_config(overrides=preset_overrides(5)).actor.epsilon_final == 0.1
+    parser = argparse.ArgumentParser()
+    register_presets(parser.add_subparsers())
+    args = parser.parse_args([
+        "presets", "--scenarios", "merge", "--presets", "1,5", "--env-steps", "800", "--eval-episodes", "2",
+        "--out", str(tmp_path / "p"), "--set", "learner.hidden=32", "--set", "learner.batch_size=32",
+        "--set", "replay.min_size=200", "--set", "replay.spi_tolerance=1024"])
+    assert args.func(args) == 0
+    results = json.loads((tmp_path / "p" / "results.json").read_text())
+    assert set(results["runs"]) == {"merge-p1", "merge-p5"}
+    for name, run in results["runs"].items():
+        cfg = (tmp_path / "p" / name / "config.yaml").read_text()
+        assert f"reward_preset: {run['preset']}" in cfg
+        assert run["episodes"] > 0 and 0.0 <= run["eval"]["survival_rate"] <= 1.0
+    assert "epsilon_final: 0.3" in (tmp_path / "p" / "merge-p1" / "config.yaml").read_text()
+    assert (tmp_path / "p" / "returns.png").read_bytes()[:4] == b"\x89PNG"
+    assert "| merge | 5 |" in (tmp_path / "p" / "table.md").read_text()

@@ -177,12 +177,14 @@ def build_parser() -> argparse.ArgumentParser:
     experiment = sub.add_parser("experiment", help="reproducible experiments (the paper's Table 2 comparison)")
     from laneshift.checkpoint_curve import register as register_checkpoint_curve
     from laneshift.experiments import register as register_experiments
+    from laneshift.reward_study import register as register_presets
     from laneshift.sb3_baseline import register as register_sb3
 
     which = experiment.add_subparsers(dest="experiment_cmd", required=True, metavar="WHICH")
     register_experiments(which)
     register_checkpoint_curve(which)
     register_sb3(which)
+    register_presets(which)
     bench = sub.add_parser("bench", help="benchmarks (env speed, replay throughput)")
     bench_sub = bench.add_subparsers(dest="bench_cmd", required=True, metavar="WHAT")
     from laneshift.bench_env import register as register_bench_env

@@ -49,10 +49,12 @@ METHODS: dict[str, dict[str, Any]] = {
 INITIAL_LANES = ("random", "non-target")
 
 
-def method_config(base: RunConfig, method: str, seed: int, run_dir: Path, env_steps: int) -> RunConfig:
+def method_config(base: RunConfig, method: str, seed: int, run_dir: Path, env_steps: int,
+                  user: dict[str, Any] | None = None) -> RunConfig:
+    """The method's settings on top of ``base``; the user's ``--set`` values win over both."""
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r} (known: {', '.join(METHODS)})")
-    overrides = {**METHODS[method], "train.run_dir": str(run_dir), "train.env_steps": env_steps,
+    overrides = {**METHODS[method], **(user or {}), "train.run_dir": str(run_dir), "train.env_steps": env_steps,
                  "train.eval_episodes": 0, "train.seed": seed, "actor.seed": seed, "learner.seed": seed,
                  "replay.seed": seed, "transport.run_id": f"{method}-s{seed}"}
     return load_run_config(overrides=overrides, base=base)
@@ -78,8 +80,8 @@ def run_compare(args: argparse.Namespace) -> dict:
 
     out_dir = Path(args.out).resolve()
     out_dir.mkdir(parents=True, exist_ok=True)
-    base = load_run_config(args.config, {"env.scenario": args.scenario, "actor.workers": args.workers,
-                                         **dict(kv.split("=", 1) for kv in args.set)})
+    user = dict(kv.split("=", 1) for kv in args.set)
+    base = load_run_config(args.config, {"env.scenario": args.scenario, "actor.workers": args.workers, **user})
     methods = [m for m in args.methods.split(",") if m]
     seeds = [int(s) for s in args.seeds.split(",") if s]
     results: dict[str, Any] = {"scenario": args.scenario, "env_steps": args.env_steps, "seeds": seeds,
@@ -90,7 +92,7 @@ def run_compare(args: argparse.Namespace) -> dict:
         runs = []
         for seed in seeds:
             run_dir = out_dir / f"{method}-s{seed}"
-            cfg = method_config(base, method, seed, run_dir, args.env_steps)
+            cfg = method_config(base, method, seed, run_dir, args.env_steps, user)
             started = time.monotonic()
             log = io.StringIO()
             rc = train_local(cfg, out=log)

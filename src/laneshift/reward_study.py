@@ -1,0 +1,135 @@
+"""``laneshift experiment presets``: the paper's reward study (Table 1, figure 4).
+
+Each reward condition 1-5 is trained on each of the merge, curve and roundabout scenarios
+(100-step episodes, the paper's setting for this study) through the real local system, with the
+condition's own exploration schedule (linear epsilon 1.0 -> 0.3 or 0.1, Table 1). The output is
+the moving-average training return per condition, one panel per scenario, like figure 4, plus
+each run's final greedy evaluation.
+
+    laneshift experiment presets --scenarios merge,curve,roundabout --presets 1,2,3,4,5 \\
+        --env-steps 30000 --out runs/exp-presets
+
+Returns are only comparable within a condition: the conditions pay different rewards for the
+same behaviour, which is why the table also gives survival and achievement.
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .config import load_run_config
+
+
+def preset_overrides(preset: int) -> dict[str, Any]:
+    """The env's reward condition and Table 1's exploration schedule for it."""
+    from laneshift.actors.envs.rewards import get_preset
+
+    p = get_preset(preset)
+    return {"env.reward_preset": preset, "actor.exploration": "linear", "actor.epsilon_start": p.epsilon_initial,
+            "actor.epsilon_final": p.epsilon_final}
+
+
+def run_presets(args: argparse.Namespace) -> dict:
+    from .deploy.local import train_local
+    from .evaluate import evaluate_checkpoint
+    from .experiments import _episode_curves
+
+    out_dir = Path(args.out).resolve()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    scenarios = [s for s in args.scenarios.split(",") if s]
+    presets = [int(p) for p in args.presets.split(",") if p]
+    results: dict[str, Any] = {"env_steps": args.env_steps, "seed": args.seed, "runs": {}}
+    for scenario in scenarios:
+        for preset in presets:
+            name = f"{scenario}-p{preset}"
+            run_dir = out_dir / name
+            cfg = load_run_config(args.config, {
+                "env.scenario": scenario, **preset_overrides(preset), "actor.workers": args.workers,
+                "train.env_steps": args.env_steps, "train.run_dir": str(run_dir), "train.eval_episodes": 0,
+                "train.seed": args.seed, "actor.seed": args.seed, "learner.seed": args.seed,
+                "replay.seed": args.seed, "transport.run_id": name, **dict(kv.split("=", 1) for kv in args.set)})
+            started = time.monotonic()
+            log = io.StringIO()
+            rc = train_local(cfg, out=log)
+            (out_dir / f"{name}.log").write_text(log.getvalue())
+            if rc != 0:
+                raise RuntimeError(f"{name} failed (rc {rc}); see {out_dir / f'{name}.log'}")
+            _, returns, lengths = _episode_curves(str(run_dir))
+            ev = evaluate_checkpoint(run_dir / "checkpoints" / "final.safetensors", cfg.env,
+                                     episodes=args.eval_episodes, seed=100_000)
+            tail = returns[-100:] if len(returns) else np.zeros(1)
+            results["runs"][name] = {
+                "scenario": scenario, "preset": preset, "run_dir": str(run_dir),
+                "wall_s": round(time.monotonic() - started, 1), "episodes": int(len(returns)),
+                "return_last100": float(np.mean(tail)), "length_last100": float(np.mean(lengths[-100:])) if len(lengths) else 0.0,
+                "eval": {k: ev[k] for k in ("survival_rate", "achievement_rate", "return_mean") if k in ev}}
+            r = results["runs"][name]
+            print(f"presets: {name}: {r['episodes']} episodes, last-100 return {r['return_last100']:.1f}, "
+                  f"greedy survival {r['eval']['survival_rate']:.0%} achievement {r['eval'].get('achievement_rate', 0):.0%}",
+                  flush=True)
+    (out_dir / "results.json").write_text(json.dumps(results, indent=2))
+    (out_dir / "table.md").write_text(render(results))
+    plot(results, scenarios, presets, out_dir / "returns.png")
+    print(render(results))
+    return results
+
+
+def render(results: dict) -> str:
+    lines = [f"{results['env_steps']:,} env steps per run, seed {results['seed']}", "",
+             "| scenario | condition | episodes | last-100 return | last-100 length | greedy survival | greedy achievement |",
+             "|---|---|---|---|---|---|---|"]
+    for r in results["runs"].values():
+        lines.append(f"| {r['scenario']} | {r['preset']} | {r['episodes']:,} | {r['return_last100']:.1f} | "
+                     f"{r['length_last100']:.0f} | {r['eval']['survival_rate']:.0%} | "
+                     f"{r['eval'].get('achievement_rate', 0):.0%} |")
+    return "\n".join(lines) + "\n"
+
+
+def plot(results: dict, scenarios: list[str], presets: list[int], png: Path, window: int = 50) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .experiments import _episode_curves, _moving_average
+
+    fig, axes = plt.subplots(1, len(scenarios), figsize=(5 * len(scenarios), 4), squeeze=False)
+    for ax, scenario in zip(axes[0], scenarios):
+        for preset in presets:
+            r = results["runs"].get(f"{scenario}-p{preset}")
+            if r is None:
+                continue
+            _, returns, _ = _episode_curves(r["run_dir"])
+            if len(returns):
+                ma = _moving_average(returns, window)
+                ax.plot(np.arange(len(returns))[-len(ma):], ma, label=f"condition {preset}", color=f"C{preset - 1}")
+        ax.set_title(scenario)
+        ax.set_xlabel("episodes")
+        ax.set_ylabel(f"return ({window}-episode mean)")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle("Reward conditions of Table 1 (figure 4): training return")
+    fig.tight_layout()
+    fig.savefig(png, dpi=100)
+    plt.close(fig)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("presets", help="reward conditions 1-5 on merge/curve/roundabout (figure 4)")
+    p.add_argument("--scenarios", default="merge,curve,roundabout")
+    p.add_argument("--presets", default="1,2,3,4,5")
+    p.add_argument("--env-steps", type=int, default=30_000)
+    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--eval-episodes", type=int, default=50)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", default="runs/exp-presets")
+    p.add_argument("--config", help="base config file (YAML/TOML/JSON)")
+    p.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE")
+    p.set_defaults(func=lambda a: (run_presets(a), 0)[1])
