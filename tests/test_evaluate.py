@@ -38,3 +38,16 @@ def test_keep_lane_policy_on_straight_never_achieves_from_a_non_target_lane():
     result = evaluate_policy(KeepLaneDriver, cfg, episodes=3, seed=0)
     assert result["achievement_rate"] == 0.0
     assert 0.0 <= result["achievement_ci95"][0] <= result["achievement_ci95"][1] <= 1.0
+
+
+def test_a_checkpoint_of_another_observation_layout_is_refused_with_the_fix(tmp_path, capsys):
+    from laneshift.cli import main
+    from laneshift.learner.networks import build_q_network
+    from laneshift.learner.weights import save_checkpoint
+
+    path = save_checkpoint(build_q_network((67,), 9, (8,)), tmp_path / "old.safetensors",
+                           {"obs_shape": "67", "hidden": "8", "n_actions": 9})
+    assert main(["eval", "--checkpoint", str(path), "--scenario", "straight", "--episodes", "1"]) == 2
+    assert "env.lane_features=false" in capsys.readouterr().err
+    assert main(["eval", "--checkpoint", str(path), "--scenario", "straight", "--episodes", "1", "--max-steps", "5",
+                 "--set", "env.lane_features=false"]) == 0

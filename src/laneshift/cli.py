@@ -118,7 +118,11 @@ def _eval(args: argparse.Namespace) -> int:
 
     cfg = _config_from(args, {"env.scenario": args.scenario, "env.initial_lane": args.initial_lane,
                               "env.max_steps": args.max_steps, "env.observation": args.observation})
-    result = evaluate_checkpoint(args.checkpoint, cfg.env, episodes=args.episodes, seed=args.seed)
+    try:
+        result = evaluate_checkpoint(args.checkpoint, cfg.env, episodes=args.episodes, seed=args.seed)
+    except (ValueError, OSError) as exc:  # a checkpoint of another env or layout, or no such file
+        print(f"laneshift eval: {exc}", file=sys.stderr)
+        return 2
     if cfg.env.is_lka:
         from laneshift.evaluate import load_greedy_policy, lka_response, plot_lka_response
 

@@ -85,6 +85,16 @@ def load_greedy_policy(checkpoint: str | Path) -> Callable[[np.ndarray], int]:
 
 
 def evaluate_checkpoint(checkpoint: str | Path, env_cfg: EnvConfig, episodes: int, seed: int = 0) -> dict:
+    from laneshift.envspec import env_spec
+    from laneshift.learner.weights import load_checkpoint
+
+    _, meta = load_checkpoint(checkpoint)
+    expected = env_spec(env_cfg).schema.obs_shape
+    trained = tuple(int(x) for x in meta.get("obs_shape", "").split(",") if x)
+    if trained and trained != tuple(expected):
+        hint = " (the 67-float vector layout is env.lane_features=false)" if trained == (67,) else ""
+        raise ValueError(f"checkpoint {checkpoint} was trained on observations of shape {trained}, "
+                         f"the env gives {tuple(expected)}{hint}")
     greedy = load_greedy_policy(checkpoint)
     return evaluate_policy(lambda env: greedy, env_cfg, episodes, seed)
 
