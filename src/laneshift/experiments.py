@@ -60,6 +60,17 @@ def method_config(base: RunConfig, method: str, seed: int, run_dir: Path, env_st
     return load_run_config(overrides=overrides, base=base)
 
 
+def train_logged(cfg: RunConfig, log_path: Path) -> None:
+    """One real local training run, its console output kept in ``log_path``; raises if it failed."""
+    from .deploy.local import train_local
+
+    log = io.StringIO()
+    rc = train_local(cfg, out=log)
+    log_path.write_text(log.getvalue())
+    if rc != 0:
+        raise RuntimeError(f"training run {cfg.train.run_dir} failed (rc {rc}); see {log_path}")
+
+
 def evaluate_both_lanes(make_policy, env: EnvConfig, episodes: int, seed: int, max_steps: int) -> dict:
     out = {}
     for lane in INITIAL_LANES:
@@ -76,8 +87,6 @@ def pooled(evals: list[dict], key: str) -> dict:
 
 
 def run_compare(args: argparse.Namespace) -> dict:
-    from .deploy.local import train_local
-
     out_dir = Path(args.out).resolve()
     out_dir.mkdir(parents=True, exist_ok=True)
     user = dict(kv.split("=", 1) for kv in args.set)
@@ -94,11 +103,7 @@ def run_compare(args: argparse.Namespace) -> dict:
             run_dir = out_dir / f"{method}-s{seed}"
             cfg = method_config(base, method, seed, run_dir, args.env_steps, user)
             started = time.monotonic()
-            log = io.StringIO()
-            rc = train_local(cfg, out=log)
-            (out_dir / f"{method}-s{seed}.log").write_text(log.getvalue())
-            if rc != 0:
-                raise RuntimeError(f"{method} seed {seed} failed (rc {rc}); see {out_dir / f'{method}-s{seed}.log'}")
+            train_logged(cfg, out_dir / f"{method}-s{seed}.log")
             greedy = load_greedy_policy(run_dir / "checkpoints" / "final.safetensors")
             evals = evaluate_both_lanes(lambda env: greedy, cfg.env, args.eval_episodes, eval_seed,
                                         args.eval_max_steps)

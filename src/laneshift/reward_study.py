@@ -16,7 +16,6 @@ same behaviour, which is why the table also gives survival and achievement.
 from __future__ import annotations
 
 import argparse
-import io
 import json
 import time
 from pathlib import Path
@@ -37,9 +36,8 @@ def preset_overrides(preset: int) -> dict[str, Any]:
 
 
 def run_presets(args: argparse.Namespace) -> dict:
-    from .deploy.local import train_local
     from .evaluate import evaluate_checkpoint
-    from .experiments import _episode_curves
+    from .experiments import _episode_curves, train_logged
 
     out_dir = Path(args.out).resolve()
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -56,11 +54,7 @@ def run_presets(args: argparse.Namespace) -> dict:
                 "train.seed": args.seed, "actor.seed": args.seed, "learner.seed": args.seed,
                 "replay.seed": args.seed, "transport.run_id": name, **dict(kv.split("=", 1) for kv in args.set)})
             started = time.monotonic()
-            log = io.StringIO()
-            rc = train_local(cfg, out=log)
-            (out_dir / f"{name}.log").write_text(log.getvalue())
-            if rc != 0:
-                raise RuntimeError(f"{name} failed (rc {rc}); see {out_dir / f'{name}.log'}")
+            train_logged(cfg, out_dir / f"{name}.log")
             _, returns, lengths = _episode_curves(str(run_dir))
             ev = evaluate_checkpoint(run_dir / "checkpoints" / "final.safetensors", cfg.env,
                                      episodes=args.eval_episodes, seed=100_000)
