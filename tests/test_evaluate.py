@@ -51,3 +51,14 @@ def test_a_checkpoint_of_another_observation_layout_is_refused_with_the_fix(tmp_
     assert "env.lane_features=false" in capsys.readouterr().err
     assert main(["eval", "--checkpoint", str(path), "--scenario", "straight", "--episodes", "1", "--max-steps", "5",
                  "--set", "env.lane_features=false"]) == 0
+
+
+def test_crashes_are_counted_by_kind_and_starting_lane():
+    from laneshift.config import EnvConfig
+    from laneshift.evaluate import evaluate_policy
+
+    # Always turning left leaves the road or hits someone: every episode crashes, each counted once.
+    r = evaluate_policy(lambda env: (lambda obs: 1), EnvConfig(scenario="straight", max_steps=200), 6, seed=3)
+    counted = sum(n for by_lane in r["crashes"].values() for n in by_lane.values())
+    assert counted == round((1 - r["survival_rate"]) * 6) and set(r["crashes"]) <= {"collision", "offroad"}
+    assert "offroad" in r["crashes"]

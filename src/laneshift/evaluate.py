@@ -44,9 +44,12 @@ def evaluate_policy(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig
     env = make_env(env_cfg)
     policy = make_policy(env)
     returns, lengths, survived, achieved = [], [], 0, 0
+    # How the lane-change episodes that crashed ended: "collision" or "offroad", by starting lane.
+    crashes: dict[str, dict[str, int]] = {}
     try:
         for ep in range(episodes):
             obs, info = env.reset(seed=seed + ep)
+            start_lane = info.get("lane_index")
             total, steps, done = 0.0, 0, False
             while not done:
                 obs, reward, terminated, truncated, info = env.step(int(policy(obs)))
@@ -56,6 +59,9 @@ def evaluate_policy(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig
             crashed = bool(info.get("crashed", terminated))  # LKA: terminated = left the lane
             survived += not crashed
             achieved += (not crashed) and bool(info.get("on_target_lane", False))
+            if crashed and start_lane is not None:
+                kind = crashes.setdefault("offroad" if info.get("offroad") else "collision", {})
+                kind[f"start lane {start_lane}"] = kind.get(f"start lane {start_lane}", 0) + 1
             returns.append(total)
             lengths.append(steps)
     finally:
@@ -64,7 +70,8 @@ def evaluate_policy(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig
               "length_mean": float(np.mean(lengths)), "survival_rate": survived / episodes,
               "survival_ci95": wilson_ci95(survived, episodes)}
     if not env_cfg.is_lka:
-        result.update(achievement_rate=achieved / episodes, achievement_ci95=wilson_ci95(achieved, episodes))
+        result.update(achievement_rate=achieved / episodes, achievement_ci95=wilson_ci95(achieved, episodes),
+                      crashes=crashes)
     return result
 
 
@@ -189,6 +196,8 @@ def format_result(r: dict) -> str:
             f"length {r['length_mean']:.1f}, survival {r['survival_rate']:.0%}")
     if "achievement_rate" in r:
         text += f", achievement {r['achievement_rate']:.0%}"
+    for kind, by_lane in sorted(r.get("crashes", {}).items()):
+        text += f"\n  {kind}: {sum(by_lane.values())} ({', '.join(f'{k}: {v}' for k, v in sorted(by_lane.items()))})"
     resp = r.get("lka_response")
     if resp:
         fmt = lambda v: "never" if v is None else f"{v:.1f} s"  # noqa: E731
