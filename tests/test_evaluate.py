@@ -62,3 +62,27 @@ def test_crashes_are_counted_by_kind_and_starting_lane():
     counted = sum(n for by_lane in r["crashes"].values() for n in by_lane.values())
     assert counted == round((1 - r["survival_rate"]) * 6) and set(r["crashes"]) <= {"collision", "offroad"}
     assert "offroad" in r["crashes"]
+
+
+def test_demo_agreement_counts_the_states_where_the_greedy_action_is_the_demonstrators(tmp_path):
+    import numpy as np
+    import torch
+
+    from laneshift.demos.generate import generate_shard
+    from laneshift.demos.shard import load_shard
+    from laneshift.evaluate import demo_agreement
+    from laneshift.learner.networks import build_q_network
+    from laneshift.learner.weights import save_checkpoint
+
+    shard_dir = generate_shard(tmp_path / "demos", env_id_or_scenario="straight", env_kwargs={"max_steps": 30},
+                               episodes=2, seed=0)
+    shard = load_shard(shard_dir)
+    net = build_q_network((82,), 9, (8,))
+    for p in net.parameters():
+        torch.nn.init.zeros_(p)
+    net.net[-1].bias.data[0] = 1.0  # always action 0 ("keep speed, keep heading")
+    path = save_checkpoint(net, tmp_path / "c.safetensors", {"obs_shape": "82", "hidden": "8", "n_actions": 9})
+    out = demo_agreement(path, shard_dir)
+    assert out["states"] == len(shard.actions) == 60
+    assert out["agreement"] == np.mean(shard.actions == 0)
+    assert out["speed_agreement"] == np.mean(shard.actions // 3 == 0)

@@ -120,6 +120,10 @@ def _eval(args: argparse.Namespace) -> int:
                               "env.max_steps": args.max_steps, "env.observation": args.observation})
     try:
         result = evaluate_checkpoint(args.checkpoint, cfg.env, episodes=args.episodes, seed=args.seed)
+        if args.demo_agreement:
+            from laneshift.evaluate import demo_agreement
+
+            result["demo_agreement"] = demo_agreement(args.checkpoint, args.demo_agreement)
     except (ValueError, OSError) as exc:  # a checkpoint of another env or layout, or no such file
         print(f"laneshift eval: {exc}", file=sys.stderr)
         return 2
@@ -151,6 +155,8 @@ def _add_inspection(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", action="store_true")
     p.add_argument("--png", help="LKA: where to write the response plot (default: next to the checkpoint)")
+    p.add_argument("--demo-agreement", metavar="SHARD",
+                   help="also report how often the greedy action is the demonstrator's on this demo shard's states")
     _add_config_args(p)
     p.set_defaults(func=_eval)
     p = sub.add_parser("replay", help="talk to a running replay server")

@@ -91,6 +91,35 @@ def load_greedy_policy(checkpoint: str | Path) -> Callable[[np.ndarray], int]:
     return lambda obs: int(policy.greedy(np.asarray(obs)[None])[0])
 
 
+def demo_agreement(checkpoint: str | Path, shard_path: str | Path) -> dict:
+    """How often the checkpoint's greedy action is the demonstrator's on the shard's states (an
+    imitation diagnostic: the action set, speed part and curvature part separately)."""
+    import torch
+
+    from laneshift.actors.policy import QPolicy
+    from laneshift.demos.shard import load_shard
+    from laneshift.learner.weights import load_checkpoint, load_into
+
+    tensors, meta = load_checkpoint(checkpoint)
+    shard = load_shard(shard_path)
+    obs_shape = tuple(int(x) for x in meta["obs_shape"].split(","))
+    if tuple(shard.observations.shape[1:]) != obs_shape:
+        raise ValueError(f"the shard's observations {tuple(shard.observations.shape[1:])} do not fit the "
+                         f"checkpoint's {obs_shape}")
+    policy = QPolicy(obs_shape, int(meta["n_actions"]), tuple(int(x) for x in meta["hidden"].split(",") if x),
+                     dueling=meta.get("dueling", "0") == "1")
+    load_into(policy.net, tensors)
+    with torch.no_grad():
+        chosen = np.concatenate([policy.greedy(chunk) for chunk in np.array_split(shard.observations,
+                                                                                  max(1, len(shard.actions) // 4096))])
+    demo = np.asarray(shard.actions)
+    out = {"states": int(demo.size), "agreement": float(np.mean(chosen == demo))}
+    if int(meta["n_actions"]) == 9:  # paper actions: index = 3 * speed + curvature
+        out["speed_agreement"] = float(np.mean(chosen // 3 == demo // 3))
+        out["curvature_agreement"] = float(np.mean(chosen % 3 == demo % 3))
+    return out
+
+
 def evaluate_checkpoint(checkpoint: str | Path, env_cfg: EnvConfig, episodes: int, seed: int = 0) -> dict:
     from laneshift.envspec import env_spec
     from laneshift.learner.weights import load_checkpoint
@@ -196,6 +225,11 @@ def format_result(r: dict) -> str:
             f"length {r['length_mean']:.1f}, survival {r['survival_rate']:.0%}")
     if "achievement_rate" in r:
         text += f", achievement {r['achievement_rate']:.0%}"
+    agree = r.get("demo_agreement")
+    if agree:
+        text += (f"\n  demonstrator's action on {agree['agreement']:.0%} of {agree['states']:,} demo states"
+                 + (f" (speed part {agree['speed_agreement']:.0%}, curvature part {agree['curvature_agreement']:.0%})"
+                    if "speed_agreement" in agree else ""))
     for kind, by_lane in sorted(r.get("crashes", {}).items()):
         text += f"\n  {kind}: {sum(by_lane.values())} ({', '.join(f'{k}: {v}' for k, v in sorted(by_lane.items()))})"
     resp = r.get("lka_response")
