@@ -115,7 +115,8 @@ class Item(BaseModel):
     key: int = Field(description="online: the item's global insertion key; demo: its row in the demo table "
                                  "(the index a sampled batch reports for demo rows)")
     action: int
-    reward: float
+    reward: float = Field(description="the discounted sum of `steps` rewards (1 = an ordinary transition)")
+    steps: int = Field(description="rewards summed in `reward`; the learner bootstraps with gamma ** steps")
     terminated: bool
     truncated: bool | None = Field(None, description="online only")
     actor: str | None = Field(None, description="online only: the actor that sent the item")
@@ -210,7 +211,7 @@ def read_items(core: ReplayCore, name: str, offset: int, limit: int, include_obs
         n = max(0, min(limit, total - offset))
         keys = np.arange(first + offset, first + offset + n, dtype=np.int64) if n else np.zeros(0, np.int64)
         rows = keys % table.capacity if online else keys
-        cols = ["action", "reward", "terminated"] + (["truncated", "actor", "version", "key"] if online else [])
+        cols = ["action", "reward", "steps", "terminated"] + (["truncated", "actor", "version", "key"] if online else [])
         if include_obs:
             cols += ["obs", "next_obs"]
         data = {c: getattr(table, c)[rows].copy() for c in cols}  # fancy indexing copies; .copy() is explicit
@@ -229,6 +230,7 @@ def read_items(core: ReplayCore, name: str, offset: int, limit: int, include_obs
             item["weights_version"] = int(data["version"][j])
         item["action"] = int(data["action"][j])
         item["reward"] = _f32(data["reward"][j])
+        item["steps"] = int(data["steps"][j])
         item["terminated"] = bool(data["terminated"][j])
         if online:
             item["truncated"] = bool(data["truncated"][j])

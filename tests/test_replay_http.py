@@ -246,10 +246,11 @@ def test_demo_items_are_the_sampled_demo_region():
     assert [i["key"] for i in page["items"]] == list(range(95, 100))
     for item in page["items"]:
         k = item["key"]
-        assert set(item) == {"key", "action", "reward", "terminated", "obs", "next_obs"}  # no actor / truncated
+        assert set(item) == {"key", "action", "reward", "steps", "terminated", "obs", "next_obs"}  # no actor / truncated
         assert item["obs"] == core.demo.obs[k].tolist() and item["next_obs"] == core.demo.next_obs[k].tolist()
         assert item["action"] == core.demo.action[k] and item["reward"] == 0.25
         assert item["terminated"] == bool(core.demo.terminated[k])
+        assert item["steps"] == int(core.demo.steps[k]) == 1
 
 
 def test_items_show_priorities_with_the_prioritized_sampler():
