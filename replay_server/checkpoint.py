@@ -95,6 +95,8 @@ def restore_checkpoint(core: "ReplayCore", directory: str | Path) -> int:
     keys = np.asarray(cols["key"])
     order = np.argsort(keys, kind="stable")
     order = order[keys[order] >= 0]
+    if order.size and np.asarray(cols["steps"])[order].min() < 1:  # the wire refuses such items; so does this
+        raise CheckpointError(f"replay checkpoint {directory}: an item with steps < 1")
     table = core.online
     order = order[-table.capacity:]  # a smaller table keeps the newest items
     with core._lock:

@@ -105,6 +105,24 @@ def test_mismatched_checkpoint_is_refused(tmp_path):
         restore_checkpoint(other, tmp_path / "ckpt")
 
 
+def test_steps_survive_a_round_trip_and_a_bad_steps_column_is_refused(tmp_path):
+    core = ReplayCore(ReplayConfig(capacity=20, min_size=1), SCHEMA)
+    k = np.arange(5)
+    obs = np.repeat(k[:, None], 6, axis=1).astype(np.float32)
+    core.ingest(wire.encode_transitions(wire.TransitionBatch.from_arrays(
+        actor="w0", seq=0, weights_version=0, phase=0, env_steps=5, obs=obs, action=k, reward=k.astype(np.float32),
+        next_obs=obs, terminated=np.zeros(5), truncated=np.zeros(5), steps=[1, 2, 3, 4, 5])))
+    write_checkpoint(core, tmp_path / "ckpt")
+    fresh = ReplayCore(ReplayConfig(capacity=20, min_size=1), SCHEMA)
+    assert restore_checkpoint(fresh, tmp_path / "ckpt") == 5
+    assert fresh.online.steps[:5].tolist() == [1, 2, 3, 4, 5]
+    steps = np.load(tmp_path / "ckpt" / "steps.npy")
+    steps[2] = 0
+    np.save(tmp_path / "ckpt" / "steps.npy", steps)
+    with pytest.raises(CheckpointError, match="steps < 1"):
+        restore_checkpoint(ReplayCore(ReplayConfig(capacity=20, min_size=1), SCHEMA), tmp_path / "ckpt")
+
+
 def _stats(session, run_id) -> dict:
     reply = transport.query(session, wire.replay_stats_key(run_id), b"", 2.0)
     return wire.decode_json(reply) if reply else {}
