@@ -29,7 +29,7 @@ def _children(pid: int) -> set[int]:
 def test_bench_replay_json_end_to_end(capsys) -> None:
     parser = argparse.ArgumentParser()
     bench_replay.register(parser.add_subparsers())
-    args = parser.parse_args(["replay", "--duration", "0.3", "--warmup", "0.1", "--actors", "2",
+    args = parser.parse_args(["replay", "--duration", "1.0", "--warmup", "0.2", "--actors", "2",
                               "--capacity-vector", "2000", "--capacity-grayscale", "300", "--paced-rate", "2000",
                               "--json"])
     before = _children(os.getpid())
