@@ -61,7 +61,7 @@ class ScriptedDriver:
         # Decide whether to move one lane towards the target.
         if self.plan_lane == lane and lane != target:
             cand = lane + (1 if target > lane else -1)
-            if self._adjacent(lane, cand) and self._gap_safe(cand):
+            if env.lanes_adjacent(loc, lane, cand) and self._gap_safe(cand):
                 self.plan_lane = cand
         elif self.plan_lane != lane and abs(loc.lat[lane]) < 1.0 and not self._gap_safe(self.plan_lane):
             self.plan_lane = lane  # barely started and the gap closed: abort
@@ -75,13 +75,6 @@ class ScriptedDriver:
         return 3 * s_idx + c_idx
 
     # ------------------------------------------------------------------------------------------
-    def _adjacent(self, lane: int, other: int) -> bool:
-        loc = self.env.ego.loc
-        if not 0 <= other < self.env.layout.lanes_count or not loc.inside[other]:
-            return False
-        w = self.env.layout.paths[lane].width
-        return abs(abs(loc.lat[lane] - loc.lat[other]) - w) < 0.5
-
     def _neighbours(self, lane: int) -> tuple[float, float, float, float]:
         """(gap ahead, speed ahead, gap behind, speed behind) on ``lane``, bumper to bumper [m]."""
         return self.env.lane_neighbours(self.env.ego, lane)

@@ -35,7 +35,7 @@ from .control import curvature_index, lane_errors, meta_acceleration, meta_steer
 from .observations import OBS_LIMIT, lane_block, vector_observation, vector_size
 from .rendering import TopDownRenderer
 from .rewards import DEFAULT_REWARD_PRESET, REWARD_TERM_NAMES, compute_reward, get_preset, motion_flags
-from .traffic import AgentVehicle, Traffic, collisions, locate
+from .traffic import AgentVehicle, Loc, Traffic, collisions, locate
 
 NpcPolicy = Callable[[np.ndarray], Sequence[int] | np.ndarray]
 
@@ -241,10 +241,7 @@ class LaneChangeEnv(gym.Env):
         s_occ, v_occ = self.lane_occupants(lane, exclude=v)
         if s_occ.size == 0:
             return math.inf, 0.0, math.inf, 0.0
-        d = s_occ - v.loc.s[lane]
-        path = self.layout.paths[lane]
-        if path.closed:
-            d = (d + path.length / 2) % path.length - path.length / 2
+        d = self.lane_gap(lane, v.loc.s[lane], s_occ)
         ahead, behind = d >= 0, d < 0
         front = rear = math.inf
         v_front = v_rear = 0.0
@@ -256,14 +253,17 @@ class LaneChangeEnv(gym.Env):
             rear, v_rear = float(-d[i]) - v.LENGTH, float(v_occ[i])
         return front, v_front, rear, v_rear
 
+    def lanes_adjacent(self, loc: Loc, lane: int, other: int) -> bool:
+        """Is ``other`` a lane of the road right next to ``lane`` where ``loc`` is (one lane width
+        apart laterally; the merge ramp is adjacent to the main road only along its parallel part)?"""
+        if not 0 <= other < self.layout.lanes_count or not loc.inside[other]:
+            return False
+        return abs(abs(loc.lat[lane] - loc.lat[other]) - self.layout.paths[other].width) < 0.5
+
     def adjacent_lane(self, v: AgentVehicle, side: int) -> int | None:
         """The lane next to ``v``'s on ``side`` (-1 left, +1 right), if the road has one there."""
-        loc = v.loc
-        lane = loc.lane + side
-        if not 0 <= lane < self.layout.lanes_count or not loc.inside[lane]:
-            return None
-        width = self.layout.paths[lane].width
-        return lane if abs(abs(loc.lat[lane] - loc.lat[loc.lane]) - width) < 0.5 else None
+        lane = v.loc.lane + side
+        return lane if self.lanes_adjacent(v.loc, v.loc.lane, lane) else None
 
     def _lane_features(self, v: AgentVehicle) -> np.ndarray:
         loc = v.loc
@@ -277,8 +277,9 @@ class LaneChangeEnv(gym.Env):
             slots.append((front, v_front - forward, rear, v_rear - forward))
         return lane_block(slots)
 
-    def lane_gap(self, lane: int, s_from: float, s_to: float) -> float:
-        """Signed arc-length difference s_to - s_from on ``lane`` (wrapped on rings)."""
+    def lane_gap(self, lane: int, s_from: float, s_to: float | np.ndarray) -> float | np.ndarray:
+        """Signed arc-length difference s_to - s_from on ``lane`` (wrapped on rings); ``s_to`` may
+        be an array."""
         d = s_to - s_from
         path = self.layout.paths[lane]
         if path.closed:
@@ -441,11 +442,8 @@ class LaneChangeEnv(gym.Env):
         if label in ("LANE_LEFT", "LANE_RIGHT"):
             # Like highway-env's is_reachable_from: only a lane adjacent to the current target lane.
             cand = v.meta_lane + (-1 if label == "LANE_LEFT" else 1)
-            loc = v.loc
-            if 0 <= cand < self.layout.lanes_count and loc.inside[cand]:
-                width = self.layout.paths[cand].width
-                if abs(abs(loc.lat[cand] - loc.lat[v.meta_lane]) - width) < 0.5:
-                    v.meta_lane = cand
+            if self.lanes_adjacent(v.loc, v.meta_lane, cand):
+                v.meta_lane = cand
         elif label == "FASTER":
             v.meta_speed_index = min(v.meta_speed_index + 1, self.meta_target_speeds.size - 1)
         elif label == "SLOWER":
