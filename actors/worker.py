@@ -11,8 +11,9 @@ over zenoh (``ZenohActorLinks``) and in-process in unit tests (``laneshift.deplo
 
 Every ``send_every`` env steps it publishes one transitions batch (MATLAB: "workers send their
 experience every N steps"). With ``n_step > 1`` the batch holds n-step items (laneshift.nstep),
-each sent once its n rewards are known, so a batch can hold up to n - 1 items fewer or more. In ``sync`` mode it then waits for the next weights version, so no
-step is ever taken with stale weights; in ``async`` mode it takes the newest version if one came.
+each sent once its n rewards are known, so a batch can hold up to n - 1 items fewer or more. In
+``sync`` mode it then waits for the next weights version, so no step is ever taken with stale
+weights; in ``async`` mode it takes the newest version if one came.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from laneshift import wire
 from laneshift.config import ActorConfig, EnvConfig
 from laneshift.envspec import make_env
 from laneshift.learner.weights import tensors_digest
-from laneshift.nstep import NStepAccumulator, NStepItem
+from laneshift.nstep import NStepAccumulator, NStepItem, check_nstep
 
 from .exploration import make_schedule
 from .policy import QPolicy
@@ -69,7 +70,7 @@ class EnvWorker:
         self.sync, self.rehearsal = sync, rehearsal
         self.envs = [make_env(env_cfg) for _ in range(actor_cfg.envs_per_worker)]
         self.n_step, self.gamma = n_step, gamma
-        NStepAccumulator(n_step, gamma)  # refuses a bad n or gamma here, not mid-run
+        check_nstep(n_step, gamma)  # a bad n or gamma is refused here, not mid-run
         space = self.envs[0].observation_space
         self.policy = QPolicy(tuple(space.shape), int(self.envs[0].action_space.n), hidden,
                               seed=actor_cfg.seed + 7919 * index, dueling=dueling)

@@ -61,24 +61,21 @@ class DoubleDQN:
             td_target = reward + torch.pow(self.cfg.gamma, steps) * not_done * next_q
         td_error = q - td_target
         loss = (weight * F.huber_loss(q, td_target, reduction="none", delta=self.cfg.huber_delta)).mean()
-        margin_loss = torch.zeros(())
-        if self.cfg.margin_loss_weight > 0 and "is_demo" in batch:
-            # DQfD: on demo rows the demonstrator's action must beat every other by `margin`.
-            demo = torch.as_tensor(batch["is_demo"], dtype=torch.bool)
-            if demo.any():
+        margin_loss = bc_loss = torch.zeros(())
+        demo = torch.as_tensor(batch["is_demo"], dtype=torch.bool) if "is_demo" in batch else None
+        if demo is not None and demo.any():
+            if self.cfg.margin_loss_weight > 0:
+                # DQfD: on demo rows the demonstrator's action must beat every other by `margin`.
                 qd = q_all[demo]
                 penalty = torch.full_like(qd, self.cfg.margin)
                 penalty.scatter_(1, action[demo][:, None], 0.0)
                 margin_loss = ((qd + penalty).max(dim=1).values - q[demo]).mean()
                 loss = loss + self.cfg.margin_loss_weight * margin_loss
-        bc_loss = torch.zeros(())
-        if self.cfg.bc_loss_weight > 0 and "is_demo" in batch:
-            # Supervised imitation: cross-entropy of softmax(Q(s, .)) against the demonstrator's
-            # action on demo rows. Unlike the margin (a fixed 0.8 at Q-values near 100), it keeps
-            # pushing until the demo action clearly leads, which is what makes the small action
-            # gaps of 10 Hz control follow the demonstrator (docs/RESULTS.md).
-            demo = torch.as_tensor(batch["is_demo"], dtype=torch.bool)
-            if demo.any():
+            if self.cfg.bc_loss_weight > 0:
+                # Supervised imitation: cross-entropy of softmax(Q(s, .)) against the demonstrator's
+                # action on demo rows. Unlike the margin (a fixed 0.8 at Q-values near 100), it keeps
+                # pushing until the demo action clearly leads, which is what makes the small action
+                # gaps of 10 Hz control follow the demonstrator (docs/RESULTS.md).
                 bc_loss = F.cross_entropy(q_all[demo], action[demo])
                 loss = loss + self.cfg.bc_loss_weight * bc_loss
 
