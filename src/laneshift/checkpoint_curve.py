@@ -16,7 +16,7 @@ import json
 from pathlib import Path
 
 from .config import EnvConfig, load_run_config
-from .evaluate import evaluate_policy, load_greedy_policy
+from .evaluate import evaluate_lanes, load_checkpoint_policy
 
 
 def kept_checkpoints(run_dir: str | Path) -> list[Path]:
@@ -28,17 +28,13 @@ def kept_checkpoints(run_dir: str | Path) -> list[Path]:
 
 def evaluate_checkpoints(run_dir: str | Path, env: EnvConfig, episodes: int, seed: int,
                          initial_lanes: tuple[str, ...] = ("random",)) -> list[dict]:
-    from .learner.weights import load_checkpoint
-
     rows = []
     for path in kept_checkpoints(run_dir):
-        _, meta = load_checkpoint(path)
-        greedy = load_greedy_policy(path)
+        ckpt = load_checkpoint_policy(path)
+        meta, greedy = ckpt.meta, ckpt.greedy()
         row = {"checkpoint": path.name, "updates": int(meta.get("updates", 0)),
                "env_steps": int(meta.get("env_steps", 0)), "elapsed_s": float(meta.get("elapsed_s", 0.0))}
-        for lane in initial_lanes:
-            cfg = EnvConfig(**{**env.__dict__, "initial_lane": lane})
-            r = evaluate_policy(lambda _env: greedy, cfg, episodes, seed)
+        for lane, r in evaluate_lanes(lambda _env: greedy, env, episodes, seed, initial_lanes).items():
             row[lane] = {k: r[k] for k in ("survival_rate", "achievement_rate", "survival_ci95",
                                            "achievement_ci95", "return_mean") if k in r}  # LKA: no achievement
         rows.append(row)

@@ -10,15 +10,19 @@ Wilson score intervals.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable, NamedTuple
 
 import gymnasium as gym
 import numpy as np
 
 from .config import EnvConfig
 from .envspec import make_env
+
+if TYPE_CHECKING:  # pragma: no cover
+    from laneshift.actors.policy import QPolicy
 
 
 def wilson_ci95(successes: int, n: int) -> tuple[float, float]:
@@ -35,6 +39,8 @@ def wilson_ci95(successes: int, n: int) -> tuple[float, float]:
 
 
 Policy = Callable[[np.ndarray], int]
+#: The paper's two initial-lane settings of the test episodes.
+INITIAL_LANES = ("random", "non-target")
 
 
 def evaluate_policy(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig, episodes: int,
@@ -75,7 +81,27 @@ def evaluate_policy(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig
     return result
 
 
-def load_greedy_policy(checkpoint: str | Path) -> Callable[[np.ndarray], int]:
+def evaluate_lanes(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig, episodes: int, seed: int,
+                   lanes: tuple[str, ...] = INITIAL_LANES) -> dict[str, dict]:
+    """:func:`evaluate_policy` from each initial-lane setting, on the same episode seeds."""
+    return {lane: evaluate_policy(make_policy, dataclasses.replace(env_cfg, initial_lane=lane), episodes, seed)
+            for lane in lanes}
+
+
+class CheckpointPolicy(NamedTuple):
+    """A saved network as the actors run it, with what its metadata says about it."""
+
+    policy: "QPolicy"
+    obs_shape: tuple[int, ...]
+    n_actions: int
+    meta: dict[str, str]
+
+    def greedy(self) -> Policy:
+        return lambda obs: int(self.policy.greedy(np.asarray(obs)[None])[0])
+
+
+def load_checkpoint_policy(checkpoint: str | Path) -> CheckpointPolicy:
+    """Read a learner checkpoint once: its network (plain or dueling) and its metadata."""
     from laneshift.actors.policy import QPolicy
     from laneshift.learner.weights import load_checkpoint, load_into
 
@@ -88,33 +114,28 @@ def load_greedy_policy(checkpoint: str | Path) -> Callable[[np.ndarray], int]:
         raise ValueError(f"checkpoint {checkpoint}: missing laneshift metadata (obs_shape, hidden, n_actions)") from None
     policy = QPolicy(obs_shape, n_actions, hidden, dueling=meta.get("dueling", "0") == "1")
     load_into(policy.net, tensors)
-    return lambda obs: int(policy.greedy(np.asarray(obs)[None])[0])
+    return CheckpointPolicy(policy, obs_shape, n_actions, meta)
+
+
+def load_greedy_policy(checkpoint: str | Path) -> Policy:
+    return load_checkpoint_policy(checkpoint).greedy()
 
 
 def demo_agreement(checkpoint: str | Path, shard_path: str | Path) -> dict:
     """How often the checkpoint's greedy action is the demonstrator's on the shard's states (an
     imitation diagnostic: the action set, speed part and curvature part separately)."""
-    import torch
-
-    from laneshift.actors.policy import QPolicy
     from laneshift.demos.shard import load_shard
-    from laneshift.learner.weights import load_checkpoint, load_into
 
-    tensors, meta = load_checkpoint(checkpoint)
+    ckpt = load_checkpoint_policy(checkpoint)
     shard = load_shard(shard_path)
-    obs_shape = tuple(int(x) for x in meta["obs_shape"].split(","))
-    if tuple(shard.observations.shape[1:]) != obs_shape:
+    if tuple(shard.observations.shape[1:]) != ckpt.obs_shape:
         raise ValueError(f"the shard's observations {tuple(shard.observations.shape[1:])} do not fit the "
-                         f"checkpoint's {obs_shape}")
-    policy = QPolicy(obs_shape, int(meta["n_actions"]), tuple(int(x) for x in meta["hidden"].split(",") if x),
-                     dueling=meta.get("dueling", "0") == "1")
-    load_into(policy.net, tensors)
-    with torch.no_grad():
-        chosen = np.concatenate([policy.greedy(chunk) for chunk in np.array_split(shard.observations,
-                                                                                  max(1, len(shard.actions) // 4096))])
+                         f"checkpoint's {ckpt.obs_shape}")
+    chunks = np.array_split(shard.observations, max(1, len(shard.actions) // 4096))
+    chosen = np.concatenate([ckpt.policy.greedy(chunk) for chunk in chunks])
     demo = np.asarray(shard.actions)
     out = {"states": int(demo.size), "agreement": float(np.mean(chosen == demo))}
-    if int(meta["n_actions"]) == 9:  # paper actions: index = 3 * speed + curvature
+    if ckpt.n_actions == 9:  # paper actions: index = 3 * speed + curvature
         out["speed_agreement"] = float(np.mean(chosen // 3 == demo // 3))
         out["curvature_agreement"] = float(np.mean(chosen % 3 == demo % 3))
     return out
@@ -122,16 +143,14 @@ def demo_agreement(checkpoint: str | Path, shard_path: str | Path) -> dict:
 
 def evaluate_checkpoint(checkpoint: str | Path, env_cfg: EnvConfig, episodes: int, seed: int = 0) -> dict:
     from laneshift.envspec import env_spec
-    from laneshift.learner.weights import load_checkpoint
 
-    _, meta = load_checkpoint(checkpoint)
-    expected = env_spec(env_cfg).schema.obs_shape
-    trained = tuple(int(x) for x in meta.get("obs_shape", "").split(",") if x)
-    if trained and trained != tuple(expected):
-        hint = " (the 67-float vector layout is env.lane_features=false)" if trained == (67,) else ""
-        raise ValueError(f"checkpoint {checkpoint} was trained on observations of shape {trained}, "
-                         f"the env gives {tuple(expected)}{hint}")
-    greedy = load_greedy_policy(checkpoint)
+    ckpt = load_checkpoint_policy(checkpoint)
+    expected = tuple(env_spec(env_cfg).schema.obs_shape)
+    if ckpt.obs_shape != expected:
+        hint = " (the 67-float vector layout is env.lane_features=false)" if ckpt.obs_shape == (67,) else ""
+        raise ValueError(f"checkpoint {checkpoint} was trained on observations of shape {ckpt.obs_shape}, "
+                         f"the env gives {expected}{hint}")
+    greedy = ckpt.greedy()
     return evaluate_policy(lambda env: greedy, env_cfg, episodes, seed)
 
 

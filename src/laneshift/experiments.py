@@ -18,6 +18,7 @@ dueling head). Writes ``results.json``, ``table.md`` and
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import io
 import json
 import time
@@ -26,8 +27,8 @@ from typing import Any
 
 import numpy as np
 
-from .config import EnvConfig, RunConfig, load_run_config
-from .evaluate import evaluate_policy, load_greedy_policy, wilson_ci95
+from .config import RunConfig, load_run_config
+from .evaluate import INITIAL_LANES, evaluate_lanes, load_greedy_policy, wilson_ci95
 
 # DQfD (Hester et al. 2018): pre-training on demos (20,000 updates), demos kept in the buffer
 # (30 % of 300,000 items, i.e. about 300 scripted episodes), large-margin loss on demo rows,
@@ -46,7 +47,6 @@ METHODS: dict[str, dict[str, Any]] = {
     # changes that made the pre-trained network drive like the demonstrator (docs/RESULTS.md).
     "dqfd-bc": {**_DQFD, "learner.bc_loss_weight": 1.0, "learner.dueling": True},
 }
-INITIAL_LANES = ("random", "non-target")
 
 
 def method_config(base: RunConfig, method: str, seed: int, run_dir: Path, env_steps: int,
@@ -69,14 +69,6 @@ def train_logged(cfg: RunConfig, log_path: Path) -> None:
     log_path.write_text(log.getvalue())
     if rc != 0:
         raise RuntimeError(f"training run {cfg.train.run_dir} failed (rc {rc}); see {log_path}")
-
-
-def evaluate_both_lanes(make_policy, env: EnvConfig, episodes: int, seed: int, max_steps: int) -> dict:
-    out = {}
-    for lane in INITIAL_LANES:
-        cfg = EnvConfig(**{**env.__dict__, "initial_lane": lane, "max_steps": max_steps})
-        out[lane] = evaluate_policy(make_policy, cfg, episodes, seed)
-    return out
 
 
 def pooled(evals: list[dict], key: str) -> dict:
@@ -105,8 +97,8 @@ def run_compare(args: argparse.Namespace) -> dict:
             started = time.monotonic()
             train_logged(cfg, out_dir / f"{method}-s{seed}.log")
             greedy = load_greedy_policy(run_dir / "checkpoints" / "final.safetensors")
-            evals = evaluate_both_lanes(lambda env: greedy, cfg.env, args.eval_episodes, eval_seed,
-                                        args.eval_max_steps)
+            evals = evaluate_lanes(lambda env: greedy, dataclasses.replace(cfg.env, max_steps=args.eval_max_steps),
+                                   args.eval_episodes, eval_seed)
             runs.append({"seed": seed, "run_dir": str(run_dir), "wall_s": round(time.monotonic() - started, 1),
                          "eval": evals})
             print(f"experiment: {method} seed {seed}: " + ", ".join(
@@ -123,7 +115,7 @@ def run_compare(args: argparse.Namespace) -> dict:
                    "scripted": ScriptedDriver}
         n_base = args.eval_episodes * len(seeds)
         for name, make in drivers.items():
-            evals = evaluate_both_lanes(make, base.env, n_base, eval_seed, args.eval_max_steps)
+            evals = evaluate_lanes(make, dataclasses.replace(base.env, max_steps=args.eval_max_steps), n_base, eval_seed)
             results["baselines"][name] = {lane: {"survival": pooled([e], "survival_rate"),
                                                  "achievement": pooled([e], "achievement_rate")}
                                           for lane, e in evals.items()}

@@ -20,7 +20,7 @@ from pathlib import Path
 
 from .config import EnvConfig
 from .envspec import make_env
-from .evaluate import evaluate_policy
+from .evaluate import INITIAL_LANES, evaluate_lanes
 
 
 def train_sb3(env_cfg: EnvConfig, env_steps: int, eval_every: int, eval_episodes: int, seed: int,
@@ -50,17 +50,15 @@ def train_sb3(env_cfg: EnvConfig, env_steps: int, eval_every: int, eval_episodes
             t0 = time.monotonic()
             row = {"env_steps": self.num_timesteps,
                    "train_s": round(t0 - started - eval_time[0], 1)}
-            for lane in ("random", "non-target"):
-                r = evaluate_policy(lambda _env: greedy, EnvConfig(**{**env_cfg.__dict__, "initial_lane": lane}),
-                                    eval_episodes, eval_seed)
+            for lane, r in evaluate_lanes(lambda _env: greedy, env_cfg, eval_episodes, eval_seed).items():
                 row[lane] = {k: r[k] for k in ("survival_rate", "achievement_rate", "return_mean") if k in r}
             eval_time[0] += time.monotonic() - t0
             curve.append(row)
             print(f"sb3: {row['env_steps']:,} steps, {row['train_s']:.0f} s training: "
                   + ", ".join(f"{lane} {row[lane]['survival_rate']:.0%}/{row[lane].get('achievement_rate', 0):.0%}"
-                              for lane in ("random", "non-target")), flush=True)
+                              for lane in INITIAL_LANES), flush=True)
             reached = stop_at_achievement is not None and min(
-                row[lane].get("achievement_rate", 0.0) for lane in ("random", "non-target")) >= stop_at_achievement
+                row[lane].get("achievement_rate", 0.0) for lane in INITIAL_LANES) >= stop_at_achievement
             return not reached
 
     model.learn(total_timesteps=env_steps, callback=Scores())
