@@ -227,8 +227,7 @@ class ReplayCore:
             raw = update.priority.astype(np.float64) + cfg.priority_eps
             demo = update.is_demo.astype(bool)
             raw[demo] += cfg.demo_priority_bonus
-            # Demo leaves are live only where the mode samples demos (retention, rehearsal phase 1).
-            demo_live = self.cfg.retains_demos or self.phase == 1
+            demo_live = self.demos_sampled
             ok_demo = demo & (update.index < self.demo.size) & demo_live
             rows = update.index % self.online.capacity
             ok_online = ~demo & (self.online.key[rows] == update.index)  # not overwritten since sampled
@@ -264,6 +263,12 @@ class ReplayCore:
 
     # ------------------------------------------------------------------ control and stats
 
+    @property
+    def demos_sampled(self) -> bool:
+        """The demo table is part of what is sampled now: always in retention and dqfd's phase 2,
+        and in the demo-only phase 1 of rehearsal and dqfd."""
+        return self.cfg.retains_demos or self.phase == 1
+
     def set_phase(self, phase: int) -> None:
         if not self.cfg.pretrains or phase not in (1, 2):
             raise ValueError(f"phase {phase} is not valid in demo_mode {self.mode}")
@@ -296,7 +301,7 @@ class ReplayCore:
     def stats(self) -> dict[str, Any]:
         with self._lock:
             online_size = self.online.size
-            demo_in_buffer = self.demo.size if self.cfg.retains_demos or self.phase == 1 else 0
+            demo_in_buffer = self.demo.size if self.demos_sampled else 0
             total = online_size + demo_in_buffer
             recent_rows = sum(r for r, _ in self._recent)
             recent_demo = sum(d for _, d in self._recent)

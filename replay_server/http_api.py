@@ -262,7 +262,7 @@ def demo_info(core: ReplayCore) -> dict:
         "held_bytes": held.nbytes,
         "buffer_items": region.size,
         "buffer_bytes": region.nbytes,
-        "sampled": core.cfg.retains_demos or (core.mode == "rehearsal" and core.phase == 1),
+        "sampled": core.demos_sampled,
         "obs_shape": list(core.schema.obs_shape),
         "obs_dtype": core.schema.obs_dtype,
         "metadata": meta,
