@@ -36,7 +36,7 @@ def load_demo_table(paths: tuple[str, ...] | list[str], spec: EnvSpec, n_step: i
             raise ValueError(f"replay.demo_paths: the demo shard was recorded with {key}={recorded[key]!r}, "
                              f"the run uses {key}={run_kwargs[key]!r}")
     reward = np.asarray(shard.rewards, np.float32)
-    next_obs = np.ascontiguousarray(shard.next_observations)
+    next_obs = shard.next_observations
     terminated = np.asarray(shard.terminations, np.uint8)
     steps = np.ones(reward.shape[0], np.uint8)
     if n_step > 1:

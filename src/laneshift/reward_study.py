@@ -44,6 +44,7 @@ def run_presets(args: argparse.Namespace) -> dict:
     scenarios = [s for s in args.scenarios.split(",") if s]
     presets = [int(p) for p in args.presets.split(",") if p]
     results: dict[str, Any] = {"env_steps": args.env_steps, "seed": args.seed, "runs": {}}
+    returns_by_run: dict[str, np.ndarray] = {}  # training returns, read once for the table and the plot
     for scenario in scenarios:
         for preset in presets:
             name = f"{scenario}-p{preset}"
@@ -56,13 +57,15 @@ def run_presets(args: argparse.Namespace) -> dict:
             started = time.monotonic()
             train_logged(cfg, out_dir / f"{name}.log")
             _, returns, lengths = _episode_curves(str(run_dir))
+            returns_by_run[name] = returns
             ev = evaluate_checkpoint(run_dir / "checkpoints" / "final.safetensors", cfg.env,
                                      episodes=args.eval_episodes, seed=100_000)
             tail = returns[-100:] if len(returns) else np.zeros(1)
             results["runs"][name] = {
                 "scenario": scenario, "preset": preset, "run_dir": str(run_dir),
                 "wall_s": round(time.monotonic() - started, 1), "episodes": int(len(returns)),
-                "return_last100": float(np.mean(tail)), "length_last100": float(np.mean(lengths[-100:])) if len(lengths) else 0.0,
+                "return_last100": float(np.mean(tail)),
+                "length_last100": float(np.mean(lengths[-100:])) if len(lengths) else 0.0,
                 "eval": {k: ev[k] for k in ("survival_rate", "achievement_rate", "return_mean") if k in ev}}
             r = results["runs"][name]
             print(f"presets: {name}: {r['episodes']} episodes, last-100 return {r['return_last100']:.1f}, "
@@ -70,7 +73,7 @@ def run_presets(args: argparse.Namespace) -> dict:
                   flush=True)
     (out_dir / "results.json").write_text(json.dumps(results, indent=2))
     (out_dir / "table.md").write_text(render(results))
-    plot(results, scenarios, presets, out_dir / "returns.png")
+    plot(returns_by_run, scenarios, presets, out_dir / "returns.png")
     print(render(results))
     return results
 
@@ -86,22 +89,20 @@ def render(results: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def plot(results: dict, scenarios: list[str], presets: list[int], png: Path, window: int = 50) -> None:
+def plot(returns_by_run: dict[str, np.ndarray], scenarios: list[str], presets: list[int], png: Path,
+         window: int = 50) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .experiments import _episode_curves, _moving_average
+    from .experiments import _moving_average
 
     fig, axes = plt.subplots(1, len(scenarios), figsize=(5 * len(scenarios), 4), squeeze=False)
     for ax, scenario in zip(axes[0], scenarios):
         for preset in presets:
-            r = results["runs"].get(f"{scenario}-p{preset}")
-            if r is None:
-                continue
-            _, returns, _ = _episode_curves(r["run_dir"])
-            if len(returns):
+            returns = returns_by_run.get(f"{scenario}-p{preset}")
+            if returns is not None and len(returns):
                 ma = _moving_average(returns, window)
                 ax.plot(np.arange(len(returns))[-len(ma):], ma, label=f"condition {preset}", color=f"C{preset - 1}")
         ax.set_title(scenario)
