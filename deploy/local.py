@@ -55,14 +55,16 @@ def _default_demo_episodes(cfg: RunConfig) -> int:
 
 
 def default_demo_dir(cfg: RunConfig, episodes: int) -> Path:
-    """Where the default scripted shard lives (shared by runs; its size is in the name, so a run
-    that needs more demos gets a larger shard instead of a refusal)."""
+    """Where the default scripted shard lives (shared by runs; its size and the driver's version
+    are in the name, so a run that needs more demos, or a newer driver's, gets a new shard instead
+    of a refusal or stale demos)."""
+    from laneshift.actors.envs.demonstrator import ScriptedDriver
     from laneshift.envspec import env_spec
 
     env = cfg.env
     # The observation's shape is in the name: a layout change makes a new shard, not a refusal.
     shape = "x".join(str(d) for d in env_spec(env).schema.obs_shape)
-    name = f"{env.scenario.replace('/', '_')}-{env.observation}{shape}-p{env.reward_preset}-scripted-{episodes}ep"
+    name = f"{env.scenario.replace('/', '_')}-{env.observation}{shape}-p{env.reward_preset}-scripted-v{ScriptedDriver.VERSION}-{episodes}ep"
     return Path(cfg.train.run_dir).resolve().parent / "demos" / name
 
 
