@@ -6,6 +6,10 @@ are spread over the cluster and connect to the router at this machine's address.
 needs laneshift installed in the same environment (see ``deploy/ray-cluster.example.yaml``).
 
     laneshift train --cluster auto --workers 16 --scenario straight --mode rehearsal
+
+The run summary's ``ray nodes`` line says which node ran each worker.
+``tests/test_system_local.py::test_cluster_mode_spreads_workers_over_two_ray_nodes`` runs this
+path against a two-node cluster (two raylets on one machine, ``ray.cluster_utils.Cluster``).
 """
 
 from __future__ import annotations

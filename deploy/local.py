@@ -260,6 +260,7 @@ def _summary(cfg: RunConfig, run_dir: Path, summaries: list[dict], last: dict, w
         f"scenario        {cfg.env.scenario} ({cfg.env.observation}), demo mode {cfg.replay.demo_mode}, "
         f"{cfg.train.parallel}, {cfg.actor.workers} workers",
         f"env steps       {steps:,} in {wall:.0f} s ({steps / max(wall, 1e-6):.0f} steps/s overall), {episodes} episodes",
+        f"ray nodes       {_placement(summaries)}",
         f"learner         {last.get('updates', 0):,} updates, final weights version {last.get('version', 0)}",
         *([f"stopped early   episode {last['stop_reason']['episode']} returned {last['stop_reason']['return']:.3f}"
            f" >= train.stop_return {cfg.train.stop_return} after {last['stop_reason']['elapsed_s']} s"]
@@ -279,6 +280,12 @@ def _summary(cfg: RunConfig, run_dir: Path, summaries: list[dict], last: dict, w
     lines += [f"run dir         {run_dir}", f"checkpoint      {final}", f"tensorboard     tensorboard --logdir {run_dir / 'tb'}"]
     print("\n".join(lines), file=out, flush=True)
     return result
+
+
+def _placement(summaries: list[dict]) -> str:
+    """``2 (w0 on 46902eba, w1 on dab69b7e)``: how many Ray nodes ran the workers, and which."""
+    nodes = {s.get("node") for s in summaries}
+    return f"{len(nodes)} (" + ", ".join(f"{s['name']} on {str(s.get('node'))[:8]}" for s in summaries) + ")"
 
 
 def _fmt(v: object) -> str:

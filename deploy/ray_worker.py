@@ -23,7 +23,8 @@ class RayEnvWorker:
                                 n_step=cfg.learner.n_step, gamma=cfg.learner.gamma, dueling=cfg.learner.dueling)
 
     def run(self, env_steps: int) -> dict:
-        return self.worker.run(self.links, env_steps).as_dict()
+        # Which Ray node ran it: on a cluster the run summary shows how the workers were spread.
+        return {**self.worker.run(self.links, env_steps).as_dict(), "node": ray.get_runtime_context().get_node_id()}
 
     def close(self) -> None:
         self.worker.close()

@@ -107,9 +107,12 @@ def test_keep_lane_never_reaches_a_non_target_lane_target() -> None:
 
 
 def test_scripted_driver_is_decent() -> None:
+    """From a non-target lane (often two lane changes into ever faster traffic) it survives
+    every seeded episode and ends on the target lane in at least 9 of 10 (v1 of the driver, which
+    sat right behind a slower leader while the faster lane's gaps went by: 82 %)."""
     env = make_env("straight", initial_lane="non-target")
     survived = achieved = 0
-    for seed in range(10):
+    for seed in range(30):
         obs, _ = env.reset(seed=seed)
         driver = ScriptedDriver(env)
         while True:
@@ -118,7 +121,24 @@ def test_scripted_driver_is_decent() -> None:
                 break
         survived += not info["crashed"]
         achieved += info["on_target_lane"] and not info["crashed"]
-    assert survived >= 9 and achieved >= 5
+    assert survived == 30 and achieved >= 27
+
+
+def test_scripted_driver_keeps_a_runway_before_merging_into_faster_traffic() -> None:
+    """Behind a slower leader it caps its speed so that it can still speed up to the next lane's
+    speed without closing in on that leader: the cap is the leader's speed at exactly buffer +
+    runway, and there is no cap when the next lane is not faster."""
+    env = make_env("straight")
+    env.reset(seed=0)
+    driver = ScriptedDriver(env)
+    v_front, cand = 11.0, 14.0
+    runway = (cand - v_front) ** 2 / (2 * driver.decel) + driver.runway_margin
+    for front, expect in [(driver.buffer + runway, v_front), (driver.buffer, v_front)]:
+        driver._neighbours = lambda lane, f=front: (f, v_front, math.inf, 0.0)
+        assert driver._runway_cap(1, cand) == pytest.approx(expect)
+    driver._neighbours = lambda lane: (driver.buffer + runway + 10.0, v_front, math.inf, 0.0)
+    assert driver._runway_cap(1, cand) > v_front
+    assert driver._runway_cap(1, v_front - 1.0) == math.inf
 
 
 def test_policy_vehicles_use_the_npc_policy() -> None:

@@ -1,5 +1,6 @@
 """The whole system with 2 local workers: real Ray actors, a zenoh router, replay-server and
-learner processes. Uses the LKA plant (fast) so each run takes seconds, not minutes."""
+learner processes; and once in cluster mode, on a two-node Ray cluster started for the test. Uses
+the LKA plant (fast) so each run takes seconds, not minutes."""
 
 from __future__ import annotations
 
@@ -252,3 +253,45 @@ def test_replay_server_killed_mid_run_is_restarted_and_the_run_completes(tmp_pat
     assert 8000 - 2 * 50 <= stored + 50 * (lost + tail) <= 8000, (stored, lost, tail)
     log = (run_dir / "logs" / "replay-server.log").read_text()
     assert "restored" in log
+
+
+def test_cluster_mode_spreads_workers_over_two_ray_nodes(tmp_path, monkeypatch):
+    """``laneshift train --cluster ADDRESS`` against a real two-node Ray cluster (two raylets
+    with one CPU each, as ``ray.cluster_utils`` runs them on one machine): one worker lands on each
+    node, both connect to the router at the head's address, and every transition arrives."""
+    import tempfile
+
+    import ray._private.utils
+    from ray.cluster_utils import Cluster
+
+    from laneshift.deploy.cluster import train_cluster
+
+    monkeypatch.setenv("RAY_AUTH_MODE", "disabled")  # before the nodes start: they inherit it
+    monkeypatch.setenv("RAY_USAGE_STATS_ENABLED", "0")
+    # The cluster helper records its address in /tmp/ray/ray_current_cluster; keep /tmp/ray untouched.
+    monkeypatch.setattr(ray._private.utils, "write_ray_address", lambda *a, **k: None)
+    ray_tmp = tempfile.mkdtemp(prefix="lsc-")  # short: Ray's unix socket paths must stay < 108 chars
+    cluster = Cluster(initialize_head=True,
+                      head_node_args={"num_cpus": 1, "temp_dir": ray_tmp, "include_dashboard": False})
+    try:
+        cluster.add_node(num_cpus=1, temp_dir=ray_tmp)
+        cluster.wait_for_nodes()
+        run_dir = tmp_path / "run"
+        cfg = load_run_config(overrides={**FAST, "train.run_dir": str(run_dir), "train.env_steps": 4000,
+                                         "replay.min_size": 200})
+        out = io.StringIO()
+        assert train_cluster(cfg, cluster.address, out=out) == 0, out.getvalue()
+    finally:
+        cluster.shutdown()
+        import shutil
+
+        shutil.rmtree(ray_tmp, ignore_errors=True)
+    summary = json.loads((run_dir / "summary.json").read_text())
+    replay = json.loads((run_dir / "replay_stats.json").read_text())
+    nodes = {w["name"]: w["node"] for w in summary["workers"]}
+    assert set(nodes) == {"w0", "w1"} and len(set(nodes.values())) == 2, nodes
+    assert "ray nodes       2 (" in out.getvalue()
+    for w in summary["workers"]:
+        assert replay["actors"][w["name"]]["items"] == w["env_steps"] > 0
+    assert sum(w["env_steps"] for w in summary["workers"]) == 4000
+    assert (run_dir / "checkpoints" / "final.safetensors").exists()
