@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from laneshift.checkpoint_curve import evaluate_checkpoints, first_reaching, kept_checkpoints, render
+from laneshift.checkpoint_curve import evaluate_checkpoints, first_reaching, kept_checkpoints, render, select_best
 from laneshift.config import EnvConfig, load_run_config
 from laneshift.deploy.inprocess import train_inprocess
 
@@ -26,6 +26,34 @@ def test_kept_checkpoints_carry_their_training_budget_and_are_scored(tmp_path):
     assert all(0.0 <= r["random"]["survival_rate"] <= 1.0 for r in rows)
     assert "| u00000050.safetensors | 50 |" in render(rows, ("random",))
     assert first_reaching(rows, "random", "survival_rate", 2.0) is None
+    # The command: a table, the validation-selected checkpoint, copied where asked.
+    from laneshift.cli import main
+    from laneshift.config import save_run_config
+
+    save_run_config(cfg, tmp_path / "config.yaml")
+    best = tmp_path / "picked" / "best.safetensors"
+    assert main(["experiment", "checkpoints", "--run-dir", str(tmp_path), "--episodes", "2", "--seed", "7",
+                 "--initial-lanes", "random", "--copy-best", str(best)]) == 0
+    saved = json.loads((tmp_path / "checkpoint_curve.json").read_text())
+    assert saved["best"] == select_best(rows, ("random",))["checkpoint"]  # same episodes, same scores
+    assert best.read_bytes() == (tmp_path / "checkpoints" / saved["best"]).read_bytes()
+
+
+def _row(name: str, **lanes: tuple[float, float]) -> dict:
+    return {"checkpoint": name, **{lane: {"survival_rate": s, "achievement_rate": a, "return_mean": 0.0}
+                                   for lane, (s, a) in lanes.items()}}
+
+
+def test_select_best_ranks_by_the_worst_initial_lane_then_survival_and_keeps_the_earliest():
+    lanes = ("random", "non-target")
+    rows = [_row("u1", random=(1.0, 0.98), **{"non-target": (0.9, 0.80)}),   # worst achievement 0.80
+            _row("u2", random=(0.96, 0.90), **{"non-target": (0.94, 0.90)}),  # 0.90, worst survival 0.94
+            _row("u3", random=(1.0, 0.92), **{"non-target": (0.98, 0.90)}),   # 0.90, worst survival 0.98
+            _row("u4", random=(1.0, 0.90), **{"non-target": (0.98, 0.92)})]   # the same key as u3, later
+    assert select_best(rows, lanes)["checkpoint"] == "u3"
+    assert select_best(rows[:2], lanes)["checkpoint"] == "u2"
+    lka = [{"checkpoint": n, "random": {"survival_rate": 1.0, "return_mean": r}} for n, r in [("a", -20.0), ("b", -9.0)]]
+    assert select_best(lka, ("random",))["checkpoint"] == "b"
 
 
 def test_sb3_dqn_trains_on_the_laneshift_env_and_reports_a_curve(tmp_path, capsys):

@@ -4,15 +4,16 @@ A run trained with ``--set learner.keep_checkpoints=true`` keeps ``checkpoints/u
 every ``learner.checkpoint_every`` updates, each with the env steps and seconds of training it
 had behind it. This evaluates each one on the same greedy episodes, so the output answers "how
 many env steps / how much wall time until X % achievement" (the issue's 80 % question) and shows
-where the policy peaked.
+where the policy peaked, and picks the validation-selected checkpoint (:func:`select_best`).
 
-    laneshift experiment checkpoints --run-dir runs/exp/dqfd-s0 --episodes 50 --json
+    laneshift experiment checkpoints --run-dir runs/exp/dqfd-s0 --episodes 50 --copy-best best.safetensors
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import shutil
 from pathlib import Path
 
 from .config import EnvConfig, load_run_config
@@ -46,6 +47,24 @@ def first_reaching(rows: list[dict], lane: str, key: str, level: float) -> dict 
     return next((r for r in rows if r[lane].get(key, -1.0) >= level), None)
 
 
+def select_best(rows: list[dict], lanes: tuple[str, ...]) -> dict:
+    """The validation-selected checkpoint: the highest achievement in its worst initial-lane
+    setting, then the highest survival in its worst setting; the earliest on a tie (fewer
+    updates behind it). LKA rows (no achievement) rank by survival, then by mean return.
+
+    Select on the validation episodes (this command's default seeds) and report the chosen
+    checkpoint on the test episodes (``laneshift eval --seed 100000``): selecting on the test
+    episodes would overstate it.
+    """
+    def key(r: dict) -> tuple[float, float, float]:
+        worst_ach = min(r[lane].get("achievement_rate", 0.0) for lane in lanes)
+        worst_surv = min(r[lane]["survival_rate"] for lane in lanes)
+        worst_ret = min(r[lane]["return_mean"] for lane in lanes)
+        return (worst_ach, worst_surv, worst_ret)
+
+    return max(rows, key=key)  # max keeps the first of equal keys: the earliest checkpoint
+
+
 def render(rows: list[dict], lanes: tuple[str, ...]) -> str:
     head = "| checkpoint | updates | env steps | train s | " + " | ".join(
         f"{lane} survival | {lane} achievement" for lane in lanes) + " |"
@@ -67,10 +86,21 @@ def _run(args: argparse.Namespace) -> int:
     if not rows:
         print(f"no checkpoints in {run_dir / 'checkpoints'}")
         return 1
+    best = select_best(rows, lanes)
     out = {"run_dir": str(run_dir), "episodes": args.episodes, "seed": args.seed, "rows": rows,
-           "first_80pct_achievement": {lane: first_reaching(rows, lane, "achievement_rate", 0.8) for lane in lanes}}
+           "first_80pct_achievement": {lane: first_reaching(rows, lane, "achievement_rate", 0.8) for lane in lanes},
+           "best": best["checkpoint"]}
+    if args.copy_best:
+        dest = Path(args.copy_best)
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(run_dir / "checkpoints" / best["checkpoint"], dest)
+        out["copied_best_to"] = str(dest)
     (run_dir / "checkpoint_curve.json").write_text(json.dumps(out, indent=2))
-    print(json.dumps(out) if args.json else render(rows, lanes))
+    if args.json:
+        print(json.dumps(out))
+    else:
+        print(render(rows, lanes) + f"\nvalidation-selected: {best['checkpoint']} ({best['env_steps']:,} env steps, "
+              f"{best['elapsed_s']:.0f} s of training)" + (f", copied to {args.copy_best}" if args.copy_best else ""))
     return 0
 
 
@@ -80,5 +110,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--episodes", type=int, default=50, help="greedy episodes per checkpoint and initial lane")
     p.add_argument("--initial-lanes", default="random,non-target")
     p.add_argument("--seed", type=int, default=200_000, help="evaluation episode seeds (not the test seeds)")
+    p.add_argument("--copy-best", metavar="PATH", help="copy the validation-selected checkpoint (see select_best) to PATH")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_run)
