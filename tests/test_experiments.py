@@ -63,3 +63,22 @@ def test_reward_presets_study_trains_each_condition_with_its_own_exploration(tmp
     assert "epsilon_final: 0.3" in (tmp_path / "p" / "merge-p1" / "config.yaml").read_text()
     assert (tmp_path / "p" / "returns.png").read_bytes()[:4] == b"\x89PNG"
     assert "| merge | 5 |" in (tmp_path / "p" / "table.md").read_text()
+
+
+def test_train_method_applies_the_named_settings_under_mode_and_set(monkeypatch, capsys):
+    """``laneshift train --method dqfd-bc`` is the experiment's settings in one flag; --set wins."""
+    from laneshift import cli
+    from laneshift.deploy import local
+    from laneshift.experiments import METHODS
+
+    seen = {}
+    monkeypatch.setattr(local, "train_local", lambda cfg, **kw: seen.setdefault("cfg", cfg) and 0)
+    assert cli.main(["train", "--method", "dqfd-bc", "--set", "learner.dueling=false"]) == 0
+    cfg = seen.pop("cfg")
+    assert cfg.replay.demo_mode == "dqfd" and cfg.learner.n_step == METHODS["dqfd-bc"]["learner.n_step"] == 10
+    assert cfg.learner.bc_loss_weight == 1.0 and cfg.replay.capacity == 300_000
+    assert cfg.learner.dueling is False  # --set beats the method
+    assert cli.main(["train", "--method", "dqfd", "--mode", "retention"]) == 0
+    assert seen.pop("cfg").replay.demo_mode == "retention"  # so does --mode
+    assert cli.main(["train", "--method", "dqfq"]) != 0 and "cfg" not in seen
+    assert "--method: unknown 'dqfq' (known: none, retention, rehearsal, dqfd, dqfd-bc)" in capsys.readouterr().err

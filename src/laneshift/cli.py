@@ -26,8 +26,11 @@ def _add_config_args(p: argparse.ArgumentParser) -> None:
                    help="override any config field, e.g. --set learner.lr=1e-4 (repeatable)")
 
 
-def _config_from(args: argparse.Namespace, shortcuts: dict[str, Any] | None = None) -> RunConfig:
-    overrides: dict[str, Any] = {k: v for k, v in (shortcuts or {}).items() if v is not None}
+def _config_from(args: argparse.Namespace, shortcuts: dict[str, Any] | None = None,
+                 preset: dict[str, Any] | None = None) -> RunConfig:
+    """``--config`` file < ``preset`` (a named method's settings) < flag shortcuts < ``--set``."""
+    overrides: dict[str, Any] = dict(preset or {})
+    overrides.update({k: v for k, v in (shortcuts or {}).items() if v is not None})
     for item in args.set:
         key, sep, value = item.partition("=")
         if not sep:
@@ -40,10 +43,18 @@ def _config_from(args: argparse.Namespace, shortcuts: dict[str, Any] | None = No
 
 
 def _train(args: argparse.Namespace) -> int:
+    preset = None
+    if args.method:
+        from laneshift.experiments import METHODS
+
+        if args.method not in METHODS:
+            raise ConfigError(f"--method: unknown {args.method!r} (known: {', '.join(METHODS)})")
+        preset = METHODS[args.method]
     cfg = _config_from(args, {
         "actor.workers": args.workers, "env.scenario": args.scenario, "replay.demo_mode": args.mode,
         "train.env_steps": args.env_steps, "train.run_dir": args.run_dir, "train.parallel": args.parallel,
-        "env.observation": args.observation, "replay.demo_paths": args.demos, "transport.run_id": args.run_id})
+        "env.observation": args.observation, "replay.demo_paths": args.demos, "transport.run_id": args.run_id},
+        preset)
     if args.cluster:
         from laneshift.deploy.cluster import train_cluster
 
@@ -62,6 +73,9 @@ def _add_train(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scenario", help="straight | merge | curve | roundabout | lka")
     p.add_argument("--mode", choices=["none", "retention", "rehearsal", "dqfd"],
                    help="how demos are used (the paper's three, or dqfd: pre-training then retention)")
+    p.add_argument("--method", metavar="NAME",
+                   help="a named set of settings from `laneshift experiment compare` (none, retention, rehearsal, "
+                        "dqfd, dqfd-bc); --mode and --set win over it")
     p.add_argument("--parallel", choices=["async", "sync"], help="MATLAB parallel training mode")
     p.add_argument("--env-steps", help="total env-step budget over all workers")
     p.add_argument("--observation", choices=["vector", "grayscale"])
