@@ -49,9 +49,12 @@ def test_select_best_ranks_by_the_worst_initial_lane_then_survival_and_keeps_the
     rows = [_row("u1", random=(1.0, 0.98), **{"non-target": (0.9, 0.80)}),   # worst achievement 0.80
             _row("u2", random=(0.96, 0.90), **{"non-target": (0.94, 0.90)}),  # 0.90, worst survival 0.94
             _row("u3", random=(1.0, 0.92), **{"non-target": (0.98, 0.90)}),   # 0.90, worst survival 0.98
-            _row("u4", random=(1.0, 0.90), **{"non-target": (0.98, 0.92)})]   # the same key as u3, later
+            _row("u4", random=(1.0, 0.90), **{"non-target": (0.98, 0.92)})]   # the same rates as u3, later
     assert select_best(rows, lanes)["checkpoint"] == "u3"
     assert select_best(rows[:2], lanes)["checkpoint"] == "u2"
+    for lane in lanes:  # same rates, better worst-lane return: the later one
+        rows[3][lane]["return_mean"] = 1.0
+    assert select_best(rows, lanes)["checkpoint"] == "u4"
     lka = [{"checkpoint": n, "random": {"survival_rate": 1.0, "return_mean": r}} for n, r in [("a", -20.0), ("b", -9.0)]]
     assert select_best(lka, ("random",))["checkpoint"] == "b"
 

@@ -49,8 +49,9 @@ def first_reaching(rows: list[dict], lane: str, key: str, level: float) -> dict 
 
 def select_best(rows: list[dict], lanes: tuple[str, ...]) -> dict:
     """The validation-selected checkpoint: the highest achievement in its worst initial-lane
-    setting, then the highest survival in its worst setting; the earliest on a tie (fewer
-    updates behind it). LKA rows (no achievement) rank by survival, then by mean return.
+    setting, then the highest survival in its worst setting, then the highest mean return in its
+    worst setting; the earliest on a full tie. LKA rows (no achievement) rank by survival, then
+    by mean return.
 
     Select on the validation episodes (this command's default seeds) and report the chosen
     checkpoint on the test episodes (``laneshift eval --seed 100000``): selecting on the test

@@ -111,8 +111,11 @@ def run_compare(args: argparse.Namespace) -> dict:
     if args.baselines:
         from laneshift.actors.envs.demonstrator import KeepLaneDriver, ScriptedDriver
 
-        drivers = {"random": lambda env: (lambda obs: env.action_space.sample()), "keep-lane": KeepLaneDriver,
-                   "scripted": ScriptedDriver}
+        def random_driver(env):
+            env.action_space.seed(eval_seed)  # the random baseline's actions are reproducible too
+            return lambda obs: env.action_space.sample()
+
+        drivers = {"random": random_driver, "keep-lane": KeepLaneDriver, "scripted": ScriptedDriver}
         n_base = args.eval_episodes * len(seeds)
         for name, make in drivers.items():
             evals = evaluate_lanes(make, dataclasses.replace(base.env, max_steps=args.eval_max_steps), n_base, eval_seed)
