@@ -7,6 +7,7 @@ from __future__ import annotations
 import io
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -283,8 +284,6 @@ def test_cluster_mode_spreads_workers_over_two_ray_nodes(tmp_path, monkeypatch):
         assert train_cluster(cfg, cluster.address, out=out) == 0, out.getvalue()
     finally:
         cluster.shutdown()
-        import shutil
-
         shutil.rmtree(ray_tmp, ignore_errors=True)
     summary = json.loads((run_dir / "summary.json").read_text())
     replay = json.loads((run_dir / "replay_stats.json").read_text())

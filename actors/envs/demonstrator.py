@@ -25,6 +25,11 @@ from .lane_change import LaneChangeEnv
 from .lka import LKA_STEERING_DEG, LaneKeepingAssistEnv, discrete_model
 
 
+def _towards(lane: int, target: int) -> int:
+    """The next lane from ``lane`` towards ``target`` (``lane != target``)."""
+    return lane + (1 if target > lane else -1)
+
+
 class ScriptedDriver:
     """Rule-based lane-change driver for `LaneChangeEnv` (paper action set).
 
@@ -67,7 +72,7 @@ class ScriptedDriver:
             self.plan_lane = lane
         # Decide whether to move one lane towards the target.
         if self.plan_lane == lane and lane != target:
-            cand = lane + (1 if target > lane else -1)
+            cand = _towards(lane, target)
             if env.lanes_adjacent(loc, lane, cand) and self._gap_safe(cand):
                 self.plan_lane = cand
         elif self.plan_lane != lane and abs(loc.lat[lane]) < 1.0 and not self._gap_safe(self.plan_lane):
@@ -143,16 +148,16 @@ class ScriptedDriver:
         for ln in lanes:
             a, b = self._bounds(ln)
             lo, hi = max(lo, a), min(hi, b)
-        cand = lane + (1 if target > lane else -1)
-        if self.plan_lane == lane and lane != target and 0 <= cand < env.layout.lanes_count:
+        # Waiting on this lane to move one lane towards the target (always a lane of the road).
+        cand = _towards(lane, target) if self.plan_lane == lane and lane != target else None
+        if cand is not None:
             hi = min(hi, self._runway_cap(lane, self._lane_speed(cand)))
         if math.isfinite(loc.lane_end):  # the merge ramp ends: be able to stop before its end
             hi = min(hi, math.sqrt(2 * self.decel * max(loc.lane_end - ego.LENGTH, 0.0)))
         flow = self._lane_speed(self.plan_lane)
         desired = flow
-        if self.plan_lane == lane and lane != target:
-            cand = lane + (1 if target > lane else -1)
-            if 0 <= cand < env.layout.lanes_count and loc.inside[cand]:
+        if cand is not None:
+            if loc.inside[cand]:
                 desired = self._align_speed(cand)
         elif self.plan_lane == lane:
             front, _, rear, _ = self._neighbours(lane)

@@ -45,11 +45,9 @@ def _config_from(args: argparse.Namespace, shortcuts: dict[str, Any] | None = No
 def _train(args: argparse.Namespace) -> int:
     preset = None
     if args.method:
-        from laneshift.experiments import METHODS
+        from laneshift.experiments import method_settings
 
-        if args.method not in METHODS:
-            raise ConfigError(f"--method: unknown {args.method!r} (known: {', '.join(METHODS)})")
-        preset = METHODS[args.method]
+        preset = method_settings(args.method, "--method")
     cfg = _config_from(args, {
         "actor.workers": args.workers, "env.scenario": args.scenario, "replay.demo_mode": args.mode,
         "train.env_steps": args.env_steps, "train.run_dir": args.run_dir, "train.parallel": args.parallel,

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from .config import RunConfig, load_run_config
+from .config import ConfigError, RunConfig, load_run_config
 from .evaluate import INITIAL_LANES, evaluate_lanes, load_greedy_policy, wilson_ci95
 
 # DQfD (Hester et al. 2018): pre-training on demos (20,000 updates), demos kept in the buffer
@@ -49,12 +49,17 @@ METHODS: dict[str, dict[str, Any]] = {
 }
 
 
+def method_settings(method: str, option: str = "method") -> dict[str, Any]:
+    """The named method's config overrides; an unknown name is refused naming ``option``."""
+    if method not in METHODS:
+        raise ConfigError(f"{option}: unknown {method!r} (known: {', '.join(METHODS)})")
+    return METHODS[method]
+
+
 def method_config(base: RunConfig, method: str, seed: int, run_dir: Path, env_steps: int,
                   user: dict[str, Any] | None = None) -> RunConfig:
     """The method's settings on top of ``base``; the user's ``--set`` values win over both."""
-    if method not in METHODS:
-        raise ValueError(f"unknown method {method!r} (known: {', '.join(METHODS)})")
-    overrides = {**METHODS[method], **(user or {}), "train.run_dir": str(run_dir), "train.env_steps": env_steps,
+    overrides = {**method_settings(method, "--methods"), **(user or {}), "train.run_dir": str(run_dir), "train.env_steps": env_steps,
                  "train.eval_episodes": 0, "train.seed": seed, "actor.seed": seed, "learner.seed": seed,
                  "replay.seed": seed, "transport.run_id": f"{method}-s{seed}"}
     return load_run_config(overrides=overrides, base=base)
