@@ -185,6 +185,7 @@ def _publisher_main(argv: list[str]) -> int:
     p.add_argument("--obs-dtype", required=True)
     p.add_argument("--n-actions", type=int, required=True)
     p.add_argument("--ready", required=True)
+    p.add_argument("--go", required=True, help="publishing starts once this file exists")
     p.add_argument("--report", required=True)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--rate", type=float, default=0.0, help="transitions/s for this process (0 = as fast as possible)")
@@ -207,9 +208,17 @@ def _publisher_main(argv: list[str]) -> int:
                 return 3
             time.sleep(0.01)
         Path(a.ready).write_text("ready")
+        # Start barrier: wait until the bench says go, so no publisher that started faster than the
+        # others sends before the window's opening stats are taken (on a cold machine one publisher
+        # filled a small table alone before the second one was ready: an empty window).
+        parent = os.getppid()
+        go, deadline = Path(a.go), time.monotonic() + 120
+        while not go.exists():
+            if stop.is_set() or os.getppid() != parent or time.monotonic() > deadline:
+                return 0 if stop.is_set() else 3
+            time.sleep(0.005)
         t0 = time.monotonic()
         total = 0
-        parent = os.getppid()
         while not stop.is_set():
             if os.getppid() != parent:  # the bench died without stopping us
                 break
@@ -384,15 +393,15 @@ class _Bench:
         for j in range(count):
             self.n_pub += 1
             tag = f"pub{self.n_pub}"
-            ready, report = self.work / f"{tag}.ready", self.work / f"{tag}.json"
+            ready, report, go = self.work / f"{tag}.ready", self.work / f"{tag}.json", self.work / f"{tag}.go"
             argv = [sys.executable, "-m", "laneshift.bench_replay", "_publish", "--router", self.endpoint,
                     "--run-id", run_id, "--actors", ",".join(names[j::count]), "--batch", str(self.args.batch),
                     "--obs-shape", ",".join(map(str, schema.obs_shape)), "--obs-dtype", schema.obs_dtype,
-                    "--n-actions", str(schema.n_actions), "--ready", str(ready), "--report", str(report),
+                    "--n-actions", str(schema.n_actions), "--ready", str(ready), "--go", str(go), "--report", str(report),
                     "--seed", str(self.n_pub), "--rate", str(rate / count)]
             proc = self.group.start(tag, argv)
             self.live.add(tag)
-            pubs.append({"name": tag, "proc": proc, "ready": ready, "report": report})
+            pubs.append({"name": tag, "proc": proc, "ready": ready, "go": go, "report": report})
         try:
             for pub in pubs:
                 wait_for_file(pub["ready"], 60, self.group, pub["name"])
@@ -400,6 +409,12 @@ class _Bench:
             self.stop_publishers(pubs)
             raise BenchError(str(exc)) from None
         return pubs
+
+    @staticmethod
+    def go(pubs: list[dict]) -> None:
+        """Release the start barrier of every publisher in ``pubs``."""
+        for pub in pubs:
+            pub["go"].write_text("go")
 
     def stop_publishers(self, pubs: list[dict]) -> dict[str, dict]:
         for pub in pubs:
@@ -448,12 +463,15 @@ class _Bench:
         pubs = self.start_publishers(run_id, schema, names, rate)
         latency = None
         try:
-            if fill_to is None:
+            if fill_to is None:  # steady state: the window opens after a warm-up
+                self.go(pubs)
                 time.sleep(a.warmup)
             self.check_alive()
             meter = _CpuMeter({"server": [self.group.procs[run_id].pid], "router": [self.group.procs["router"].pid],
                                "publishers": [p["proc"].pid for p in pubs]})
             s0 = self.stats(run_id)
+            if fill_to is not None:  # first fill: the window opens before the first transition is sent
+                self.go(pubs)
             if sample_during:
                 latency = self.sample_latency(run_id, schema, a.duration, warmup_n=3, min_n=5)
             elif fill_to is not None:
