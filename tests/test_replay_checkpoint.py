@@ -144,7 +144,7 @@ def test_kill_9_loses_at_most_one_interval_and_restart_restores(tmp_path):
         wait_for_file(tmp_path / "ready", 60, group, "replay-server")
         with transport.open_session(cfg.transport) as session:
             pub = transport.data_publisher(session, wire.transitions_key(run_id, "w0"))
-            time.sleep(0.3)
+            assert transport.wait_matching(pub, 30)  # else the puts below go nowhere
             for seq in range(50):
                 pub.put(batch(seq))
             assert transport.wait_for(lambda: _stats(session, run_id)["tables"]["online"]["size"] == 500, 10)

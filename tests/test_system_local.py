@@ -137,7 +137,7 @@ def test_malformed_messages_are_counted_and_dropped(replay_server_process):
     good = wire.encode_transitions(_batch(5))
     with transport.open_session(cfg.transport) as session:
         pub = transport.data_publisher(session, wire.transitions_key(run_id, "w9"))
-        time.sleep(0.3)  # let the subscription propagate through the router
+        assert transport.wait_matching(pub, 30)  # else the puts below go nowhere
         pub.put(b"not a laneshift message at all")
         pub.put(good[:-7])  # truncated
         pub.put(wire.encode_transitions(_batch(3, np.zeros((3, 5), np.float32))))  # wrong shape
@@ -248,7 +248,9 @@ def test_replay_server_killed_mid_run_is_restarted_and_the_run_completes(tmp_pat
     lost = sum(a["lost_batches"] for a in actors.values())
     # Batches sent after the last one the server saw (an actor that ended while it was down).
     tail = sum(w["batches"] - 1 - actors[w["name"]]["last_seq"] for w in summary["workers"])
-    assert 0 < stored <= 8000 and lost + tail > 0
+    # Losing nothing is possible: actors held back by the rate limiter wait for the next flow
+    # message, which only the restarted server sends (seen once in about ten runs under load).
+    assert 0 < stored <= 8000
     # Every transition is stored or counted as lost, exactly, but for at most one batch per actor
     # that a checkpoint caught in part (its chunks were copied on both sides of the insert).
     assert 8000 - 2 * 50 <= stored + 50 * (lost + tail) <= 8000, (stored, lost, tail)

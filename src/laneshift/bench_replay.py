@@ -201,12 +201,9 @@ def _publisher_main(argv: list[str]) -> int:
     rows = a.batch
     with transport.open_session(TransportConfig(router=a.router, run_id=a.run_id)) as session:
         pubs = [transport.data_publisher(session, wire.transitions_key(a.run_id, actor)) for actor in actors]
-        deadline = time.monotonic() + 60
-        while not all(pub.matching_status.matching for pub in pubs):  # the server's subscription is known
-            if stop.is_set() or time.monotonic() > deadline:
-                print("publisher: no matching subscriber", file=sys.stderr, flush=True)
-                return 3
-            time.sleep(0.01)
+        if not all(transport.wait_matching(pub, 60) for pub in pubs):  # the server's subscription is known
+            print("publisher: no matching subscriber", file=sys.stderr, flush=True)
+            return 3
         Path(a.ready).write_text("ready")
         # Start barrier: wait until the bench says go, so no publisher that started faster than the
         # others sends before the window's opening stats are taken (on a cold machine one publisher
@@ -427,7 +424,10 @@ class _Bench:
             try:
                 sent.update(json.loads(pub["report"].read_text())["actors"])
             except (OSError, ValueError, KeyError):
-                pass  # a publisher that never reported: its actors count as "unknown sent"
+                # Its actors count as "unknown sent" (never_stored: None); say why in the bench log.
+                rc = pub["proc"].poll()
+                self.say(f"publisher {pub['name']} left no report (exit {rc}); end of its log:\n"
+                         f"{self.group.log_tail(pub['name'])}")
         return sent
 
     def settle(self, run_id: str, sent: dict[str, dict], timeout_s: float = 60.0) -> dict:

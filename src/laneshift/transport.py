@@ -35,6 +35,11 @@ def session_config(endpoint: str, mode: str) -> zenoh.Config:
     conf.insert_json5("mode", json.dumps(mode))
     conf.insert_json5("scouting/multicast/enabled", "false")
     conf.insert_json5("scouting/gossip/enabled", "false")
+    # No shared memory. zenoh puts messages over 3 KB into a 16 MB SHM pool by default, and under
+    # CPU starvation the sender reuses a buffer before the router has read it: the router logs
+    # "Error receiving SHM buffer: Buffer is invalidated" and drops the message, BLOCK or not
+    # (bench replay with two busy-loop processes beside it lost 585 of ~6,200 batches in one window).
+    conf.insert_json5("transport/shared_memory/enabled", "false")
     if mode == "router":
         conf.insert_json5("listen/endpoints", json.dumps([endpoint]))
     else:
@@ -66,6 +71,15 @@ def open_session(cfg: TransportConfig, mode: str = "client") -> zenoh.Session:
 def data_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
     """A publisher that never drops (back-pressure instead of loss)."""
     return session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+
+
+def wait_matching(publisher: zenoh.Publisher, timeout_s: float) -> bool:
+    """Wait until some subscriber matches ``publisher``; False on timeout.
+
+    A put before the router has told this session about the subscriber goes nowhere, and BLOCK
+    does not help (nothing to block on), so a producer waits here before its first message.
+    """
+    return wait_for(lambda: publisher.matching_status.matching, timeout_s, interval_s=0.01)
 
 
 class LatestValue:
