@@ -27,6 +27,8 @@ def test_session_config_is_client_behind_router_without_shared_memory() -> None:
     assert conf["scouting"]["multicast"]["enabled"] is False and conf["scouting"]["gossip"]["enabled"] is False
     # Shared memory dropped messages under CPU starvation ("Buffer is invalidated"), BLOCK or not.
     assert conf["transport"]["shared_memory"]["enabled"] is False
+    queue = conf["transport"]["link"]["tx"]["queue"]
+    assert queue["size"]["data"] == 16 and queue["congestion_control"]["block"]["wait_before_close"] == 60_000_000
     router = json.loads(str(transport.session_config("tcp/127.0.0.1:7447", "router")))
     assert router["listen"]["endpoints"] == ["tcp/127.0.0.1:7447"]
     assert router["transport"]["shared_memory"]["enabled"] is False
