@@ -58,7 +58,27 @@ class WorkerSummary:
     wall_s: float
 
     def as_dict(self) -> dict:
-        return dict(self.__dict__)
+        """JSON-ready; ``versions_used`` (one entry per batch sent, 23k for a 750k-step worker)
+        becomes ``version_runs``: ``[[version, batches], ...]`` in order (see ``expand_version_runs``)."""
+        out = dict(self.__dict__)
+        out["version_runs"] = version_runs(out.pop("versions_used"))
+        return out
+
+
+def version_runs(versions: list[int]) -> list[list[int]]:
+    """Run-length encode: ``[3, 3, 4] -> [[3, 2], [4, 1]]``."""
+    runs: list[list[int]] = []
+    for v in versions:
+        if runs and runs[-1][0] == v:
+            runs[-1][1] += 1
+        else:
+            runs.append([v, 1])
+    return runs
+
+
+def expand_version_runs(runs: list[list[int]]) -> list[int]:
+    """The inverse of ``version_runs``: the weights version of each batch, in order."""
+    return [v for v, n in runs for _ in range(n)]
 
 
 class EnvWorker:

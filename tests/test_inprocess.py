@@ -3,6 +3,7 @@ learner logic, with every message still encoded and decoded by the wire contract
 
 from __future__ import annotations
 
+from laneshift.actors.worker import expand_version_runs
 from laneshift.config import load_run_config
 from laneshift.deploy.inprocess import train_inprocess
 
@@ -27,7 +28,7 @@ def test_sync_inprocess_rounds(tmp_path):
     cfg = load_run_config(overrides={**FAST, "train.env_steps": 1000, "train.parallel": "sync",
                                      "train.run_dir": str(tmp_path)})
     result = train_inprocess(cfg)
-    used = [w["versions_used"] for w in result["workers"]]
+    used = [expand_version_runs(w["version_runs"]) for w in result["workers"]]
     assert used[0] == used[1] == list(range(10))
 
 

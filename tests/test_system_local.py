@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from laneshift import transport, wire
+from laneshift.actors.worker import expand_version_runs
 from laneshift.config import load_run_config
 from laneshift.deploy.local import free_tcp_port, train_local
 from laneshift.deploy.processes import ProcessGroup, wait_for_file
@@ -69,7 +70,7 @@ def test_retention_async_two_workers(tmp_path, lka_demos):
     assert abs(replay["demo_share_recent_samples"] - 0.1) < 0.03, replay["demo_share_recent_samples"]
     # Weight versions reached both actors while they acted.
     for w in workers.values():
-        assert w["weight_updates"] >= 3 and max(w["versions_used"]) >= 2
+        assert w["weight_updates"] >= 3 and max(expand_version_runs(w["version_runs"])) >= 2
     assert (run_dir / "checkpoints" / "final.safetensors").exists()
     assert list((run_dir / "tb").glob("events.out.tfevents.*"))
 
@@ -81,13 +82,13 @@ def test_rehearsal_phase1_stores_nothing_and_phase2_starts_from_it(tmp_path, lka
     assert replay["phase"] == 2
     # Every stored item was made in phase 2 (actors only act once the phase-1 network exists).
     assert replay["tables"]["online"]["inserted"] == 2000
-    assert all(v >= 1 for w in summary["workers"] for v in w["versions_used"])
+    assert all(v >= 1 for w in summary["workers"] for v in expand_version_runs(w["version_runs"]))
     phase1, meta = load_checkpoint(run_dir / "checkpoints" / "phase1.safetensors")
     assert meta["phase"] == "1" and int(meta["updates"]) == 150
     # Version 1 is the first phase-2 broadcast. No later version can exist before some worker acted
     # with it (the learner needs min_size inserts first), so at least one worker started on it; a
     # worker whose Ray process came up later joins at the newest version instead.
-    first_on_v1 = [w for w in summary["workers"] if w["versions_used"][0] == 1]
+    first_on_v1 = [w for w in summary["workers"] if expand_version_runs(w["version_runs"])[0] == 1]
     assert first_on_v1
     for w in first_on_v1:
         assert w["first_weights_sha256"] == tensors_digest(phase1)
@@ -96,7 +97,7 @@ def test_rehearsal_phase1_stores_nothing_and_phase2_starts_from_it(tmp_path, lka
 def test_sync_mode_never_acts_on_stale_weights(tmp_path):
     _, summary, replay = run(tmp_path, **{"train.parallel": "sync", "train.env_steps": 1000,
                                           "replay.min_size": 200, "learner.updates_per_round": 4})
-    used = [w["versions_used"] for w in summary["workers"]]
+    used = [expand_version_runs(w["version_runs"]) for w in summary["workers"]]
     # Round k of every worker is acted with version k: the newest, never an older one.
     assert used[0] == used[1] == list(range(len(used[0])))
     assert len(used[0]) == 10
