@@ -20,7 +20,6 @@ import json
 import math
 import os
 import shutil
-import socket
 import sys
 import tempfile
 import time
@@ -32,12 +31,6 @@ from laneshift.config import RunConfig, save_run_config
 from laneshift.learner.loop import worker_budgets, worker_names
 
 from .processes import ChildFailed, ProcessGroup, wait_for_file
-
-
-def free_tcp_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _default_demo_episodes(cfg: RunConfig) -> int:
@@ -148,7 +141,7 @@ def train_local(cfg: RunConfig, out: TextIO = sys.stdout, ray_address: str | Non
     """
     run_dir = Path(cfg.train.run_dir).resolve()
     run_dir.mkdir(parents=True, exist_ok=True)
-    endpoint = f"tcp/{advertise_host}:{free_tcp_port()}"
+    endpoint = f"tcp/{advertise_host}:{transport.free_tcp_port()}"
     cfg = cfg.replace(transport=dataclasses.replace(cfg.transport, router=endpoint),
                       train=dataclasses.replace(cfg.train, run_dir=str(run_dir)),
                       # Local runs serve the HTTP inspection API on a free loopback port unless told otherwise.

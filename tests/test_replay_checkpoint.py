@@ -15,7 +15,6 @@ import pytest
 
 from laneshift import transport, wire
 from laneshift.config import ReplayConfig, load_run_config, save_run_config
-from laneshift.deploy.local import free_tcp_port
 from laneshift.deploy.processes import ProcessGroup, wait_for_file
 from laneshift.replay_server.checkpoint import CheckpointError, restore_checkpoint, write_checkpoint
 from laneshift.replay_server.core import ReplayCore
@@ -129,7 +128,7 @@ def _stats(session, run_id) -> dict:
 
 
 def test_kill_9_loses_at_most_one_interval_and_restart_restores(tmp_path):
-    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    endpoint = f"tcp/127.0.0.1:{transport.free_tcp_port()}"
     cfg = load_run_config(overrides={"env.scenario": "lka", "transport.router": endpoint,
                                      "train.run_dir": str(tmp_path), "replay.checkpoint_every_s": 0.3,
                                      "replay.capacity": 10_000, "replay.min_size": 1})

@@ -20,7 +20,7 @@ import pytest
 from laneshift import transport, wire
 from laneshift.actors.worker import expand_version_runs
 from laneshift.config import load_run_config
-from laneshift.deploy.local import free_tcp_port, train_local
+from laneshift.deploy.local import train_local
 from laneshift.deploy.processes import ProcessGroup, wait_for_file
 from laneshift.learner.weights import load_checkpoint, tensors_digest
 
@@ -107,7 +107,7 @@ def test_sync_mode_never_acts_on_stale_weights(tmp_path):
 @pytest.fixture
 def replay_server_process(tmp_path):
     """A router and a replay-server process, as `laneshift train` starts them."""
-    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    endpoint = f"tcp/127.0.0.1:{transport.free_tcp_port()}"
     cfg = load_run_config(overrides={**FAST, "transport.router": endpoint, "train.run_dir": str(tmp_path),
                                      "replay.min_size": 2})
     from laneshift.config import save_run_config

@@ -4,7 +4,6 @@ back-pressure instead of loss, no shared memory, and a publisher that can wait f
 from __future__ import annotations
 
 import json
-import socket
 import threading
 import time
 
@@ -12,12 +11,6 @@ import zenoh
 
 from laneshift import transport
 from laneshift.config import TransportConfig
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def test_session_config_is_client_behind_router_without_shared_memory() -> None:
@@ -37,7 +30,7 @@ def test_session_config_is_client_behind_router_without_shared_memory() -> None:
 def test_slow_subscriber_gets_every_large_message_in_order() -> None:
     """22 KB messages (one actor batch) to a subscriber that drains slower than they are put:
     the publisher is held back (BLOCK), nothing is dropped or reordered."""
-    cfg = TransportConfig(router=f"tcp/127.0.0.1:{_free_port()}", run_id="t")
+    cfg = TransportConfig(router=f"tcp/127.0.0.1:{transport.free_tcp_port()}", run_id="t")
     n, size = 600, 22_000
     with zenoh.open(transport.session_config(cfg.router, "router")), \
             transport.open_session(cfg) as sub_session, transport.open_session(cfg) as pub_session:

@@ -289,13 +289,6 @@ class _CpuMeter:
 # ----------------------------------------------------------------------------- the benchmark
 
 
-def _free_tcp_port() -> int:
-    # Same as deploy.local.free_tcp_port; importing that module would import torch (via the learner).
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 class _Bench:
     def __init__(self, args: argparse.Namespace, work: Path, log: TextIO):
         from laneshift.deploy.processes import ProcessGroup
@@ -303,7 +296,7 @@ class _Bench:
         self.args = args
         self.work = work
         self.log = log
-        self.endpoint = f"tcp/127.0.0.1:{_free_tcp_port()}"
+        self.endpoint = f"tcp/127.0.0.1:{transport.free_tcp_port()}"
         self.group = ProcessGroup(work / "logs")
         self.py = [sys.executable, "-m", "laneshift"]
         self.session = None

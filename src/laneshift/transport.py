@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import os
+import socket
 import threading
 import time
 from typing import Callable
@@ -68,6 +69,13 @@ SERVICE_RUNTIME = "(rx: (worker_threads: 4))"
 def use_service_runtime() -> None:
     """Call before the first session of a router or replay-server process opens."""
     os.environ.setdefault("ZENOH_RUNTIME", SERVICE_RUNTIME)
+
+
+def free_tcp_port() -> int:
+    """A TCP port free on 127.0.0.1 right now, for a router endpoint of a local run or a test."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
 
 
 def open_session(cfg: TransportConfig, mode: str = "client") -> zenoh.Session:
