@@ -23,13 +23,15 @@ class ZenohActorLinks:
         self._flow = transport.LatestValue(session, wire.replay_flow_key(run_id))
         self._insert_ok = True
         self._last_query = 0.0
-        self._matched = False
+        self._first_send = True
 
     def send_transitions(self, payload: bytes) -> None:
-        if not self._matched:
-            # First batch: wait for the replay server's subscription to reach this session. If it
-            # never does, send anyway: the server counts the gap in seq as lost batches.
-            self._matched = transport.wait_matching(self._transitions, self.timeout_s)
+        if self._first_send:
+            # First batch only: wait for the replay server's subscription to reach this session.
+            # If it never does, send anyway (the server counts the gap in seq as lost batches)
+            # and do not wait again: the hot path must not pay timeout_s per batch.
+            self._first_send = False
+            transport.wait_matching(self._transitions, self.timeout_s)
         self._transitions.put(payload)
 
     def send_episode(self, payload: bytes) -> None:

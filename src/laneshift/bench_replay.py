@@ -201,7 +201,10 @@ def _publisher_main(argv: list[str]) -> int:
     rows = a.batch
     with transport.open_session(TransportConfig(router=a.router, run_id=a.run_id)) as session:
         pubs = [transport.data_publisher(session, wire.transitions_key(a.run_id, actor)) for actor in actors]
-        if not all(transport.wait_matching(pub, 60) for pub in pubs):  # the server's subscription is known
+        # Until the server's subscription is known (a put before that goes nowhere), or we are stopped.
+        matched = transport.wait_for(lambda: stop.is_set() or all(p.matching_status.matching for p in pubs), 60,
+                                     interval_s=0.01)
+        if not matched or stop.is_set():
             print("publisher: no matching subscriber", file=sys.stderr, flush=True)
             return 3
         Path(a.ready).write_text("ready")

@@ -59,7 +59,8 @@ def method_settings(method: str, option: str = "method") -> dict[str, Any]:
 def method_config(base: RunConfig, method: str, seed: int, run_dir: Path, env_steps: int,
                   user: dict[str, Any] | None = None) -> RunConfig:
     """The method's settings on top of ``base``; the user's ``--set`` values win over both."""
-    overrides = {**method_settings(method, "--methods"), **(user or {}), "train.run_dir": str(run_dir), "train.env_steps": env_steps,
+    overrides = {**method_settings(method, "--methods"), **(user or {}),
+                 "train.run_dir": str(run_dir), "train.env_steps": env_steps,
                  "train.eval_episodes": 0, "train.seed": seed, "actor.seed": seed, "learner.seed": seed,
                  "replay.seed": seed, "transport.run_id": f"{method}-s{seed}"}
     return load_run_config(overrides=overrides, base=base)
