@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml
 	# Exactly torch 2.13.0 first: its CPU wheel is on disk; any other spec downloads GB of CUDA packages.
 	$(PY) -m pip install --disable-pip-version-check -q torch==2.13.0
 	# torch stays pinned in the same resolve: stable-baselines3 (the sb3 baseline) must not move it.
-	$(PY) -m pip install --disable-pip-version-check -q -e ".[test,baselines]" torch==2.13.0
+	$(PY) -m pip install --disable-pip-version-check -q -e ".[test,baselines,cluster]" torch==2.13.0
 	@if $(PY) -m pip list 2>/dev/null | grep -i nvidia; then echo "error: CUDA packages were installed"; exit 1; fi
 	@touch $(STAMP)
 

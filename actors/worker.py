@@ -81,6 +81,15 @@ def expand_version_runs(runs: list[list[int]]) -> list[int]:
     return [v for v, n in runs for _ in range(n)]
 
 
+@dataclass(frozen=True)
+class Resume:
+    """Where a (re)started worker begins: env steps already done, the next batch's seq."""
+
+    env_steps: int = 0
+    next_seq: int = 0
+    restarts: int = 0
+
+
 class EnvWorker:
     def __init__(self, name: str, index: int, env_cfg: EnvConfig, actor_cfg: ActorConfig,
                  hidden: tuple[int, ...], sync: bool, rehearsal: bool, n_step: int = 1, gamma: float = 0.99,
@@ -130,9 +139,15 @@ class EnvWorker:
 
     # ------------------------------------------------------------------ acting
 
-    def run(self, links: ActorLinks, env_steps: int) -> WorkerSummary:
-        """Act for ``env_steps`` steps (over all env copies), then return a summary."""
+    def run(self, links: ActorLinks, env_steps: int, resume: Resume | None = None) -> WorkerSummary:
+        """Act until ``env_steps`` steps (over all env copies) are done, then return a summary.
+
+        ``resume``: a restarted worker goes on from what the replay server stored of it: its step
+        count (and so its epsilon) and its batch sequence, so the budget is spent once and every
+        batch it ever sent is either stored or counted as lost.
+        """
         started = time.monotonic()
+        resume = resume or Resume()
         # Rehearsal: phase 1 learns from demos alone, so workers start with the phase-2 network.
         if not self._await_weights(links, -1, phase=2 if self.rehearsal else None):
             return self._summary(0, 0, 0, [], started)
@@ -141,9 +156,12 @@ class EnvWorker:
             cfg = dataclasses.replace(cfg, epsilon_start=cfg.phase2_epsilon_start)
         epsilon = make_schedule(cfg, self.index, budget=env_steps)
         n_envs = len(self.envs)
-        obs = np.stack([env.reset(seed=self.cfg.seed + 1000 * self.index + j)[0] for j, env in enumerate(self.envs)])
+        # A resumed worker reseeds differently: replaying the first run's episodes would bias the data.
+        seed = self.cfg.seed + 1000 * self.index + 7_777_777 * resume.restarts
+        obs = np.stack([env.reset(seed=seed + j)[0] for j, env in enumerate(self.envs)])
         ep_return, ep_len = np.zeros(n_envs), np.zeros(n_envs, np.int64)
-        steps = episodes = seq = 0
+        episodes = 0
+        steps, seq = resume.env_steps, resume.next_seq
         versions: list[int] = []
         iters = max(1, -(-self.cfg.send_every // n_envs))
         pending = [NStepAccumulator(self.n_step, self.gamma) for _ in self.envs]

@@ -1,33 +1,33 @@
-"""``laneshift train --cluster ADDRESS``: env workers as Ray actors on a running Ray cluster.
+"""``laneshift train --cluster ADDRESS``: the same launcher on a running Ray cluster.
 
-Run it on the cluster's head node (or any node the workers can reach). The zenoh router, replay
-server and learner run as processes on this machine, exactly as in local mode; the Ray actors
-are spread over the cluster and connect to the router at this machine's address. Every node
-needs laneshift installed in the same environment (see ``deploy/ray-cluster.example.yaml``).
+What it is: how the address is chosen. ``auto`` (or ``RAY_ADDRESS``, which ``ray job submit``
+sets) joins the cluster this node belongs to; ``HOST:PORT`` its GCS; ``ray://HOST:10001``
+through Ray Client (``laneshift[cluster]``). Router, replay server, learner and env workers are
+Ray actors placed by their ``deploy.*_resources``; the router listens on the address of the node
+it landed on (``deploy.advertise_host`` to override) at ``deploy.router_port`` (7447 by default).
+May import: ``deploy.launch``.
 
     laneshift train --cluster auto --workers 16 --scenario straight --mode rehearsal
-
-The run summary's ``ray nodes`` line says which node ran each worker.
-``tests/test_system_local.py::test_cluster_mode_spreads_workers_over_two_ray_nodes`` runs this
-path against a two-node cluster (two raylets on one machine, ``ray.cluster_utils.Cluster``).
 """
 
 from __future__ import annotations
 
+import os
 import sys
 from typing import TextIO
 
 from laneshift.config import RunConfig
 
-from .local import train_local
+from .launch import train
 
 
-def head_address() -> str:
-    """This node's address as Ray sees it (reachable by the other nodes)."""
-    import ray.util
+def resolve_address(address: str) -> str:
+    """``auto`` means RAY_ADDRESS when set (inside ``ray job submit``), else Ray's own lookup."""
+    if address == "auto":
+        return os.environ.get("RAY_ADDRESS") or "auto"
+    return address
 
-    return ray.util.get_node_ip_address()
 
-
-def train_cluster(cfg: RunConfig, address: str, out: TextIO = sys.stdout, advertise_host: str | None = None) -> int:
-    return train_local(cfg, out=out, ray_address=address, advertise_host=advertise_host or head_address())
+def train_cluster(cfg: RunConfig, address: str, out: TextIO = sys.stdout, *, resume: bool = False,
+                  overwrite: bool = False) -> int:
+    return train(cfg, address=resolve_address(address), out=out, resume=resume, overwrite=overwrite)

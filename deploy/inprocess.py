@@ -1,8 +1,10 @@
 """The same component graph in one process, for unit tests and debugging (no Ray, no zenoh).
 
-Workers and the learner run in threads and talk through in-memory links to a ReplayCore; every
-message still goes through the wire encoder and decoder, so the contract is exercised as in a
-real run. Local and cluster modes use the zenoh links instead (deploy/local.py).
+What it is: the in-process runner. The components come from the same ``deploy.builder.Builder``
+as in local and cluster mode; only where they run differs: workers and the learner are threads
+talking through in-memory links to a ReplayCore. Every message still goes through the wire
+encoder and decoder, so the contract is exercised as in a real run.
+May import: the contract and ``deploy.builder``.
 
     >>> from laneshift.config import load_run_config
     >>> cfg = load_run_config(overrides={"env.scenario": "lka", "train.env_steps": 2000})  # doctest: +SKIP
@@ -15,20 +17,19 @@ import collections
 import threading
 from dataclasses import dataclass, field
 
+from typing import Any
+
 from laneshift import wire
-from laneshift.actors.worker import EnvWorker
 from laneshift.config import RunConfig
-from laneshift.envspec import env_spec
-from laneshift.learner.loop import Learner, worker_budgets, worker_names
-from laneshift.replay_server.core import ReplayCore
-from laneshift.replay_server.service import build_core
+
+from .builder import Builder
 
 
 @dataclass
 class Board:
     """What the zenoh router carries in a real run: the newest weights, episodes, stop."""
 
-    core: ReplayCore
+    core: Any  # laneshift.replay_server.core.ReplayCore
     stop: threading.Event = field(default_factory=threading.Event)
     cond: threading.Condition = field(default_factory=threading.Condition)
     weights: bytes = b""
@@ -110,20 +111,17 @@ class InProcessLearnerLinks:
 
 def train_inprocess(cfg: RunConfig) -> dict:
     """Run workers and learner as threads until the env-step budget is spent; returns a summary."""
-    spec = env_spec(cfg.env)
-    board = Board(core=build_core(cfg))
+    builder = Builder(cfg)
+    board = Board(core=builder.replay_core())
     learner_stop = threading.Event()
-    learner = Learner(cfg, spec, InProcessLearnerLinks(board, spec.schema), learner_stop)
+    learner = builder.learner(InProcessLearnerLinks(board, builder.spec.schema), learner_stop)
     learner_thread = threading.Thread(target=learner.run, name="learner", daemon=True)
     learner_thread.start()
-    names = worker_names(cfg.actor.workers)
-    share = worker_budgets(cfg.train.env_steps, len(names))
+    names, share = builder.workers, builder.budgets
     summaries: dict[str, dict] = {}
 
     def work(i: int, name: str) -> None:
-        worker = EnvWorker(name, i, cfg.env, cfg.actor, cfg.learner.hidden, sync=cfg.train.parallel == "sync",
-                           rehearsal=cfg.replay.pretrains, n_step=cfg.learner.n_step,
-                           gamma=cfg.learner.gamma, dueling=cfg.learner.dueling)
+        worker = builder.env_worker(i)
         try:
             summaries[name] = worker.run(InProcessActorLinks(board, name), share[i]).as_dict()
         finally:
@@ -137,5 +135,5 @@ def train_inprocess(cfg: RunConfig) -> dict:
     learner_stop.set()
     board.stop.set()
     learner_thread.join(timeout=60)
-    return {"workers": [summaries[n] for n in names if n in summaries], "replay": board.core.stats(),
+    return {"workers": [summaries[n] for n in names if n in summaries], "replay": board.core.stats(all_actors=True),
             "learner": board.learner_stats, "updates": learner.agent.updates, "version": learner.version}

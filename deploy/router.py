@@ -1,6 +1,13 @@
-"""``laneshift router``: a zenoh router every other laneshift process connects to as a client.
+"""The zenoh router every other laneshift process connects to as a client.
+
+What it is: ``Router`` (a zenoh session in router mode on one endpoint), run by the Ray actor
+``deploy.actors.RouterActor`` in a training run and by ``laneshift router`` on its own.
+May import: the contract (``laneshift.transport``) and zenoh; no component.
 
 (On a cluster, ``zenohd`` works as well; this one needs nothing beyond the Python package.)
+Clients reconnect by themselves when a router comes back on the same endpoint (measured: about
+3 s after a restart, subscriptions and queryables redeclared), which is why a restarted router
+must listen where the old one did.
 """
 
 from __future__ import annotations
@@ -13,13 +20,29 @@ import zenoh
 from laneshift.transport import session_config, use_service_runtime
 
 
+class Router:
+    def __init__(self, listen: str):
+        self.listen = listen
+        self._session: zenoh.Session | None = None
+
+    def start(self) -> "Router":
+        use_service_runtime()
+        self._session = zenoh.open(session_config(self.listen, "router"))
+        print(f"router: listening on {self.listen}", flush=True)
+        return self
+
+    def close(self) -> None:
+        if self._session is not None:
+            self._session.close()
+            self._session = None
+            print("router: stopped", flush=True)
+
+
 def run_router(listen: str) -> int:
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
-    use_service_runtime()
-    with zenoh.open(session_config(listen, "router")):
-        print(f"router: listening on {listen}", flush=True)
-        stop.wait()
-    print("router: stopped", flush=True)
+    router = Router(listen).start()
+    stop.wait()
+    router.close()
     return 0

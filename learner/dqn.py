@@ -24,11 +24,22 @@ from laneshift.config import LearnerConfig
 from .networks import build_q_network
 
 
+def resolve_device(name: str) -> torch.device:
+    """``learner.device``: auto picks cuda when torch sees a GPU; cuda without one is refused."""
+    if name == "auto":
+        name = "cuda" if torch.cuda.is_available() else "cpu"
+    if name == "cuda" and not torch.cuda.is_available():
+        raise ValueError("learner.device: cuda asked for, but torch sees no GPU on this node "
+                         "(use learner.device=auto or cpu, or place the learner with deploy.learner_resources)")
+    return torch.device(name)
+
+
 class DoubleDQN:
     def __init__(self, obs_shape: tuple[int, ...], n_actions: int, cfg: LearnerConfig):
         torch.manual_seed(cfg.seed)
         self.cfg = cfg
-        self.online = build_q_network(obs_shape, n_actions, cfg.hidden, cfg.dueling)
+        self.device = resolve_device(cfg.device)
+        self.online = build_q_network(obs_shape, n_actions, cfg.hidden, cfg.dueling).to(self.device)
         self.target = copy.deepcopy(self.online).requires_grad_(False)
         self.updates = 0
         self.reset_optimizer()
@@ -39,16 +50,30 @@ class DoubleDQN:
         self.optimizer = torch.optim.Adam(self.online.parameters(), lr=self.cfg.lr, weight_decay=self.cfg.weight_decay)
         self.target.load_state_dict(self.online.state_dict())
 
+    def state_dict(self) -> dict:
+        """Everything a restarted learner needs to go on as if nothing happened (tensors only,
+        so ``torch.load(weights_only=True)`` reads it back without unpickling code)."""
+        return {"online": self.online.state_dict(), "target": self.target.state_dict(),
+                "optimizer": self.optimizer.state_dict(), "updates": torch.tensor(self.updates)}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.online.load_state_dict(state["online"])
+        self.target.load_state_dict(state["target"])
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.updates = int(state["updates"])
+
     def update(self, batch: Mapping[str, np.ndarray]) -> dict[str, float]:
-        obs = torch.as_tensor(batch["obs"])
-        action = torch.as_tensor(batch["action"], dtype=torch.int64)
-        reward = torch.as_tensor(batch["reward"], dtype=torch.float32)
-        next_obs = torch.as_tensor(batch["next_obs"])
-        not_done = 1.0 - torch.as_tensor(batch["terminated"], dtype=torch.float32)
+        dev = self.device
+        obs = torch.as_tensor(batch["obs"], device=dev)
+        action = torch.as_tensor(batch["action"], dtype=torch.int64, device=dev)
+        reward = torch.as_tensor(batch["reward"], dtype=torch.float32, device=dev)
+        next_obs = torch.as_tensor(batch["next_obs"], device=dev)
+        not_done = 1.0 - torch.as_tensor(batch["terminated"], dtype=torch.float32, device=dev)
         # n-step items (laneshift.nstep) sum `steps` rewards: bootstrap with gamma ** steps. Required:
         # a silent default of 1 would bootstrap n-step returns with gamma and blow the values up.
-        steps = torch.as_tensor(batch["steps"], dtype=torch.float32)
-        weight = torch.as_tensor(batch.get("weight", np.ones(len(reward), np.float32)), dtype=torch.float32)
+        steps = torch.as_tensor(batch["steps"], dtype=torch.float32, device=dev)
+        weight = torch.as_tensor(batch.get("weight", np.ones(len(reward), np.float32)), dtype=torch.float32,
+                                 device=dev)
 
         # Q(s, a) of the actions taken.
         q_all = self.online(obs)
@@ -61,8 +86,8 @@ class DoubleDQN:
             td_target = reward + torch.pow(self.cfg.gamma, steps) * not_done * next_q
         td_error = q - td_target
         loss = (weight * F.huber_loss(q, td_target, reduction="none", delta=self.cfg.huber_delta)).mean()
-        margin_loss = bc_loss = torch.zeros(())
-        demo = torch.as_tensor(batch["is_demo"], dtype=torch.bool) if "is_demo" in batch else None
+        margin_loss = bc_loss = torch.zeros((), device=dev)
+        demo = torch.as_tensor(batch["is_demo"], dtype=torch.bool, device=dev) if "is_demo" in batch else None
         if demo is not None and demo.any():
             if self.cfg.margin_loss_weight > 0:
                 # DQfD: on demo rows the demonstrator's action must beat every other by `margin`.
@@ -88,11 +113,11 @@ class DoubleDQN:
         if self.updates % self.cfg.target_update_period == 0:
             self.target.load_state_dict(self.online.state_dict())
         # Per-item |TD error|: the new priorities when the replay samples by priority.
-        self.last_td_abs = td_error.detach().abs().numpy()
+        self.last_td_abs = td_error.detach().abs().cpu().numpy()
         return {"loss": float(loss.detach()), "q_mean": float(q.detach().mean()), "grad_norm": float(grad_norm),
                 "td_abs": float(self.last_td_abs.mean()), "margin_loss": float(margin_loss.detach()),
                 "bc_loss": float(bc_loss.detach())}
 
     @torch.no_grad()
     def greedy(self, obs: np.ndarray) -> np.ndarray:
-        return self.online(torch.as_tensor(obs)).argmax(dim=1).numpy()
+        return self.online(torch.as_tensor(obs, device=self.device)).argmax(dim=1).cpu().numpy()

@@ -59,12 +59,12 @@ class ZenohLearnerLinks:
 
     def replay_stats(self) -> dict | None:
         reply = transport.query(self.session, wire.replay_stats_key(self.run_id), b"", self.timeout)
-        return wire.decode_json(reply) if reply is not None else None
+        return _json_or_none(reply)
 
     def replay_control(self, body: dict) -> dict | None:
         reply = transport.query(self.session, wire.replay_control_key(self.run_id), wire.encode_json(body),
                                 self.timeout)
-        return wire.decode_json(reply) if reply is not None else None
+        return _json_or_none(reply)
 
     def publish_weights(self, payload: bytes) -> None:
         self._latest = payload
@@ -88,3 +88,15 @@ class ZenohLearnerLinks:
     def stop_all(self) -> None:
         """Broadcast the run-wide stop (actors and this learner end their loops)."""
         self.session.put(wire.control_key(self.run_id), wire.encode_json({"cmd": "stop"}))
+
+
+def _json_or_none(reply: bytes | None) -> dict | None:
+    """A reply that is missing, an ERROR message or not a JSON object reads as 'no answer':
+    the learner retries later instead of dying of one bad reply."""
+    if reply is None:
+        return None
+    try:
+        body = wire.decode_json(reply)
+    except wire.WireError:
+        return None
+    return body if isinstance(body, dict) else None

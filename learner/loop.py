@@ -27,23 +27,13 @@ import numpy as np
 import torch
 
 from laneshift import transport, wire
-from laneshift.config import RunConfig
+from laneshift.config import RunConfig, worker_budgets, worker_names  # noqa: F401 - re-exported
 from laneshift.envspec import EnvSpec, env_spec
 
 from .dqn import DoubleDQN
 from .links import LearnerLinks, ZenohLearnerLinks
 from .metrics import MetricsLog
 from .weights import save_checkpoint, to_wire
-
-
-def worker_names(n: int) -> list[str]:
-    """Actor names used in key expressions and stats: w0, w1, ..."""
-    return [f"w{i}" for i in range(n)]
-
-
-def worker_budgets(total: int, n: int) -> list[int]:
-    """The run's env-step budget split over ``n`` workers (the first ones take the remainder)."""
-    return [total // n + (i < total % n) for i in range(n)]
 
 
 class Learner:
@@ -68,28 +58,98 @@ class Learner:
         self.stop_reason: dict | None = None
         self.started = time.monotonic()
         self._updates_at_last_log, self._steps_at_last_log, self._time_at_last_log = 0, 0, time.monotonic()
+        self.last_status: dict = {}
+        self.checkpoint_failures = 0  # writes that failed (full disk, read-only dir): counted, retried later
+        self._last_state_save = time.monotonic()
+        self.restored_from: dict | None = self._restore()
+
+    # ------------------------------------------------------------------ restart
+
+    @property
+    def state_path(self) -> Path:
+        return self.run_dir / "checkpoints" / "learner_state.pt"
+
+    @property
+    def version_path(self) -> Path:
+        return self.run_dir / "checkpoints" / "published_version"
+
+    def _restore(self) -> dict | None:
+        """A restarted (or resumed) learner goes on from its last full state.
+
+        The weights version continues above every version this run ever published (the
+        ``published_version`` file is written on each broadcast), so actors, which ignore versions
+        they already passed, take the new weights at once and versions never go backwards.
+        """
+        if not self.state_path.exists():
+            return None
+        state = torch.load(self.state_path, map_location=self.agent.device, weights_only=True)
+        self.agent.load_state_dict(state["agent"])
+        published = _read_int(self.version_path)
+        self.version = max(int(state["version"]), published) + 1
+        self.phase = int(state["phase"])
+        self.episodes = int(state["episodes"])
+        info = {"updates": self.agent.updates, "version": self.version, "phase": self.phase,
+                "path": str(self.state_path)}
+        print(f"learner: restored {self.state_path} (update {self.agent.updates}, phase {self.phase}); "
+              f"continuing at weights version {self.version}", flush=True)
+        return info
+
+    def save_state(self) -> bool:
+        """Write the full training state atomically; a failed write is counted and retried later."""
+        state = {"agent": self.agent.state_dict(), "version": torch.tensor(self.version),
+                 "phase": torch.tensor(self.phase), "episodes": torch.tensor(self.episodes)}
+        tmp = self.state_path.with_suffix(".tmp")
+        try:
+            self.state_path.parent.mkdir(parents=True, exist_ok=True)
+            torch.save(state, tmp)
+            tmp.replace(self.state_path)  # the previous complete state stays valid until this rename
+        except (OSError, RuntimeError) as exc:  # torch wraps ENOSPC in RuntimeError
+            self._checkpoint_failed("learner state", exc)
+            try:
+                tmp.unlink(missing_ok=True)
+            except OSError:
+                pass
+            return False
+        self._last_state_save = time.monotonic()
+        return True
+
+    def _checkpoint_failed(self, what: str, exc: Exception) -> None:
+        self.checkpoint_failures += 1
+        print(f"learner: writing the {what} failed ({exc}); training goes on, retrying at the next checkpoint "
+              f"({self.checkpoint_failures} failed so far)", flush=True)
 
     # ------------------------------------------------------------------ weights
 
     def publish(self) -> None:
+        try:  # before the broadcast: a restarted learner must never reuse a version actors saw
+            _write_int(self.version_path, self.version)
+        except OSError as exc:
+            self._checkpoint_failed("published version", exc)
         self.links.publish_weights(to_wire(self.agent.online, self.version, self.phase, self.agent.updates))
 
-    def checkpoint(self, name: str = "latest") -> Path:
+    def checkpoint(self, name: str = "latest") -> Path | None:
         meta = {"version": self.version, "updates": self.agent.updates, "phase": self.phase,
                 "env_id": self.spec.env_id, "obs_shape": ",".join(map(str, self.spec.schema.obs_shape)),
                 "obs_dtype": self.spec.schema.obs_dtype, "n_actions": self.spec.schema.n_actions,
                 "hidden": ",".join(map(str, self.lcfg.hidden)), "dueling": int(self.lcfg.dueling),
                 "env_steps": sum(self.actor_steps.values()), "elapsed_s": round(time.monotonic() - self.started, 1)}
-        return save_checkpoint(self.agent.online, self.run_dir / "checkpoints" / f"{name}.safetensors", meta)
+        try:
+            return save_checkpoint(self.agent.online, self.run_dir / "checkpoints" / f"{name}.safetensors", meta)
+        except OSError as exc:  # a full disk or read-only run dir must not end training
+            self._checkpoint_failed(f"{name} checkpoint", exc)
+            return None
 
     # ------------------------------------------------------------------ main loop
 
     def run(self) -> None:
         self.publish()
-        print(f"learner: version 0 published; mode {self.cfg.replay.demo_mode}, parallel {self.cfg.train.parallel}, "
+        print(f"learner: version {self.version} published on {self.agent.device}; mode {self.cfg.replay.demo_mode}, "
+              f"parallel {self.cfg.train.parallel}, "
               f"{sum(p.numel() for p in self.agent.online.parameters())} parameters", flush=True)
         if self.phase == 1:
             self._rehearsal_phase1()
+        elif self.phase == 2 and self.restored_from:
+            self._set_replay_phase(2)  # a replay server restarted without a checkpoint starts in phase 1
         next_log = time.monotonic()
         while not self._should_stop():
             if self.cfg.train.parallel == "sync":
@@ -98,10 +158,12 @@ class Learner:
                 self._async_step()
             if time.monotonic() >= next_log:
                 self._log()
+                self._maybe_save_state()
                 next_log = time.monotonic() + 1.0
         self._log()
         self.checkpoint("latest")
         self.checkpoint("final")
+        self.save_state()
         self.links.publish_stats(wire.encode_json({**self._status(), "done": True}))
         self.metrics.close()
         print(f"learner: stopped after {self.agent.updates} updates, version {self.version}", flush=True)
@@ -149,19 +211,30 @@ class Learner:
                 self._updates(batch)
             if time.monotonic() >= next_log:
                 self._log()
+                self._maybe_save_state()
                 next_log = time.monotonic() + 1.0
         if self.stop.is_set():
             return
         self.checkpoint("phase1")
-        while (reply := self.links.replay_control({"cmd": "set_phase", "phase": 2})) is None or not reply.get("ok"):
-            if self.stop.wait(0.2):
-                return
+        if not self._set_replay_phase(2):
+            return
         # Phase 2: a new training run whose initial value is the phase-1 network.
         self.agent.reset_optimizer()
         self.phase, self.version = 2, self.version + 1
         self.publish()
         print(f"learner: {self.cfg.replay.demo_mode} phase 2 from the phase-1 network (version {self.version})",
               flush=True)
+
+    def _set_replay_phase(self, phase: int) -> bool:
+        while (reply := self.links.replay_control({"cmd": "set_phase", "phase": phase})) is None or not reply.get("ok"):
+            if self.stop.wait(0.2):
+                return False
+        return True
+
+    def _maybe_save_state(self) -> None:
+        every = self.lcfg.checkpoint_every_s
+        if every and time.monotonic() - self._last_state_save >= every:
+            self.save_state()
 
     def _async_step(self) -> None:
         batch = self._fetch(wire.SampleRequest(self.lcfg.batch_size, self.lcfg.prefetch))
@@ -221,8 +294,8 @@ class Learner:
         now = time.monotonic()
         dt = max(now - self._time_at_last_log, 1e-6)
         ups = (self.agent.updates - self._updates_at_last_log) / dt
-        actors = self.replay_stats.get("actors", {})
-        env_steps = sum(int(a.get("env_steps", 0)) for a in actors.values())
+        actors = self.replay_stats.get("actors", {})  # the first few actors; totals below cover all
+        env_steps = int(self.replay_stats.get("actors_total", {}).get("env_steps", 0))
         steps_per_s = (env_steps - self._steps_at_last_log) / dt
         self._updates_at_last_log, self._steps_at_last_log, self._time_at_last_log = self.agent.updates, env_steps, now
         return {
@@ -245,6 +318,7 @@ class Learner:
         if stats is not None:
             self.replay_stats = stats
         status = self._status()
+        self.last_status = status  # what the launcher's progress line reads (deploy.actors.LearnerActor.status)
         self.links.publish_stats(wire.encode_json(status))
         flat = {k: v for k, v in status.items() if isinstance(v, (int, float)) and v is not None}
         flat.update({f"version_lag_{a}": lag for a, lag in status["version_lag"].items()})
@@ -252,6 +326,20 @@ class Learner:
             flat["replay_demo_share_buffer"] = self.replay_stats.get("demo_share_buffer", 0.0)
             flat.update({f"replay_{k}": v for k, v in self.replay_stats.get("rates", {}).items()})
         self.metrics.scalars(self.agent.updates, flat)
+
+
+def _read_int(path: Path) -> int:
+    try:
+        return int(path.read_text().strip())
+    except (OSError, ValueError):
+        return -1
+
+
+def _write_int(path: Path, value: int) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(str(value))
+    tmp.replace(path)
 
 
 #: The per-row fields of a sampled batch that DoubleDQN.update reads.

@@ -19,6 +19,7 @@ Layout of ``<run dir>/replay_checkpoint/``: one ``.npy`` per column (``obs``, ``
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import time
 from pathlib import Path
@@ -46,24 +47,40 @@ def write_checkpoint(core: "ReplayCore", directory: str | Path) -> dict:
     tmp.mkdir(parents=True)
     table = core.online
     started = time.monotonic()
-    cols = {name: np.lib.format.open_memmap(tmp / f"{name}.npy", mode="w+", dtype=getattr(table, name).dtype,
-                                            shape=getattr(table, name).shape) for name in COLUMNS}
-    row_bytes = sum(c.dtype.itemsize * int(np.prod(c.shape[1:], dtype=np.int64)) for c in cols.values())
-    chunk = max(1, CHUNK_BYTES // max(row_bytes, 1))
-    for begin in range(0, table.capacity, chunk):
-        end = min(begin + chunk, table.capacity)
-        with core._lock:  # short: one chunk, then inserts and samples go on
-            for name, col in cols.items():
-                col[begin:end] = getattr(table, name)[begin:end]
-    with core._lock:
-        meta = {"format": FORMAT, "obs_shape": list(core.schema.obs_shape), "obs_dtype": core.schema.obs_dtype,
-                "n_actions": core.schema.n_actions, "capacity": table.capacity, "inserted": table.inserted,
-                "actors": {k: dict(v) for k, v in core.actors.items()}, "actor_index": dict(core._actor_index),
-                "phase": core.phase, "mode": core.mode, "time": time.time()}
-    items = int((cols["key"] >= 0).sum())  # from the copy in hand, not a second read of the file
-    for col in cols.values():
-        col.flush()
-    del cols
+    # Ordinary file writes, not a memmap: on a full disk a memmap copy dies with SIGBUS (measured:
+    # the server crashed, restarted 4 times and lost 86 % of the run), a write() raises OSError,
+    # which the caller reports and retries later while the previous checkpoint stays valid.
+    names = COLUMNS
+    files = {name: (tmp / f"{name}.npy").open("wb") for name in names}
+    try:
+        for name, f in files.items():
+            col = getattr(table, name)
+            np.lib.format.write_array_header_1_0(f, {"descr": np.lib.format.dtype_to_descr(col.dtype),
+                                                     "fortran_order": False, "shape": col.shape})
+        row_bytes = sum(getattr(table, n).dtype.itemsize * int(np.prod(getattr(table, n).shape[1:], dtype=np.int64))
+                        for n in names)
+        chunk = max(1, CHUNK_BYTES // max(row_bytes, 1))
+        items = 0
+        for begin in range(0, table.capacity, chunk):
+            end = min(begin + chunk, table.capacity)
+            with core._lock:  # short: one chunk copied to memory, then inserts and samples go on
+                parts = {name: getattr(table, name)[begin:end].copy() for name in names}
+            items += int((parts["key"] >= 0).sum())
+            for name, part in parts.items():
+                files[name].write(part.tobytes())
+        with core._lock:
+            meta = {"format": FORMAT, "obs_shape": list(core.schema.obs_shape), "obs_dtype": core.schema.obs_dtype,
+                    "n_actions": core.schema.n_actions, "capacity": table.capacity, "inserted": table.inserted,
+                    "actors": {k: dict(v) for k, v in core.actors.items()}, "actor_index": dict(core._actor_index),
+                    "phase": core.phase, "mode": core.mode, "time": time.time(),
+                    # Which run wrote it: a server of another run (or another env) refuses to restore it.
+                    "identity": dict(core.identity)}
+        for f in files.values():
+            f.flush()
+            os.fsync(f.fileno())
+    finally:
+        for f in files.values():
+            f.close()
     meta["items"] = items
     (tmp / "meta.json").write_text(json.dumps(meta))
     old = directory.with_name(directory.name + ".old")
@@ -88,6 +105,11 @@ def restore_checkpoint(core: "ReplayCore", directory: str | Path) -> int:
             or meta["n_actions"] != core.schema.n_actions):
         raise CheckpointError(f"replay checkpoint {directory}: observation {meta['obs_shape']} {meta['obs_dtype']} / "
                               f"{meta['n_actions']} actions does not match the run's env")
+    theirs, ours = meta.get("identity") or {}, core.identity
+    for key in ("run_id", "config_digest"):
+        if key in ours and theirs.get(key) != ours[key]:
+            raise CheckpointError(f"replay checkpoint {directory}: written by a run with {key} {theirs.get(key)!r}, "
+                                  f"this run has {ours[key]!r}")
     try:
         cols = {name: np.load(directory / f"{name}.npy", mmap_mode="r") for name in COLUMNS}
     except (OSError, ValueError) as exc:
@@ -107,7 +129,7 @@ def restore_checkpoint(core: "ReplayCore", directory: str | Path) -> int:
             getattr(table, name)[:n] = np.asarray(cols[name][order])
         table.key[:n] = np.arange(n)
         table.inserted = n
-        core.actors.update({k: dict(v) for k, v in meta.get("actors", {}).items()})
+        core.actors.update({k: {"lost_items": 0, **v} for k, v in meta.get("actors", {}).items()})
         core._actor_index.update({k: int(v) for k, v in meta.get("actor_index", {}).items()})
         # Each actor's last batch is the newest one whose items are really here (the stats in
         # meta.json were read after the chunked copy and may name batches it missed), so every
@@ -118,4 +140,8 @@ def restore_checkpoint(core: "ReplayCore", directory: str | Path) -> int:
                 core.actors[name]["last_seq"] = int(table.seq[:n][mine].max())
         if core.cfg.pretrains and meta.get("mode") == core.mode:
             core.phase = max(core.phase, int(meta.get("phase", core.phase)))
+        # The restored items count as already sampled at the configured ratio: counting them as
+        # fresh inserts with no samples froze the actors for 10-33 s after a restart, waiting for
+        # the learner to "catch up" on data it had long learned from.
+        core.samples = int(max(0, n - core.cfg.min_size) * core.cfg.samples_per_insert)
     return n

@@ -41,6 +41,12 @@ from .sum_tree import SumTree
 from .storage import DemoTable, RingTable
 
 MAX_ACTORS = 4096
+#: Actors listed in a stats reply: the reply stays the same size whatever the number of actors
+#: (at ~650 actors the full list outgrew the wire's 64 KiB JSON limit and broke every stats query).
+#: ``actors_total`` sums all of them; ``actor_page`` (control ``{"cmd": "actors"}``, HTTP
+#: ``/actors``) pages through the rest.
+ACTORS_IN_STATS = 32
+MAX_ACTOR_PAGE = 256
 
 
 class ReplayCore:
@@ -87,6 +93,10 @@ class ReplayCore:
         self._recent = collections.deque(maxlen=200)  # (rows, demo rows) of recent requests
         self._rates = _RateMeter()
         self.last_checkpoint: dict = {}  # set by the service's checkpointer
+        # Who this server serves ({"run_id", "config_digest"}); written into checkpoints and checked on restore.
+        self.identity: dict[str, str] = {}
+        self.checkpoint_failures = 0  # checkpoint writes that failed (full disk, read-only dir)
+        self.http_url: str | None = None  # where this server's HTTP inspection API answers, if on
         # Prioritized sampling: one sum tree over [demo rows | online rows]. Which leaves carry mass
         # is the demo mode: demo leaves are zero in `none` and in rehearsal phase 2.
         self.prioritized = cfg.sampler == "prioritized"
@@ -123,9 +133,15 @@ class ReplayCore:
                     return "too_many_actors"
                 self._actor_index[batch.actor] = len(self._actor_index)
                 stats = self.actors[batch.actor] = {"batches": 0, "items": 0, "stored": 0, "last_seq": -1,
-                                                    "lost_batches": 0, "last_version": -1, "env_steps": 0}
-            if batch.seq > stats["last_seq"] + 1 and stats["last_seq"] >= 0:
-                stats["lost_batches"] += batch.seq - stats["last_seq"] - 1  # seq gap: messages lost in transit
+                                                    "lost_batches": 0, "lost_items": 0, "last_version": -1,
+                                                    "env_steps": 0}
+            if batch.seq > stats["last_seq"] + 1:
+                # A gap in seq: batches lost in transit, or stored by a server that died before its
+                # checkpoint. An actor first seen at seq k > 0 lost its first k batches here (a
+                # restarted server with no checkpoint), so last_seq starts at -1, not "unknown".
+                stats["lost_batches"] += batch.seq - stats["last_seq"] - 1
+                # Items in the gap: the actor's env steps between its last stored batch and this one.
+                stats["lost_items"] += max(0, batch.env_steps - len(batch) - stats["env_steps"])
             stats["last_seq"] = max(stats["last_seq"], batch.seq)
             stats["batches"] += 1
             stats["items"] += len(batch)
@@ -294,12 +310,45 @@ class ReplayCore:
                 return {"ok": True, "phase": self.phase}
             if cmd == "stats":
                 return {"ok": True, "stats": self.stats()}
+            if cmd == "actors":  # a page of per-actor stats (stats lists only the first few)
+                return {"ok": True, **self.actor_page(body.get("offset", 0), body.get("limit", MAX_ACTOR_PAGE))}
+            if cmd == "actor_state":  # where a restarted actor resumes: its stored steps and next seq
+                return {"ok": True, **self.actor_state(str(body.get("actor", "")))}
         except (TypeError, ValueError) as exc:
             return {"ok": False, "error": str(exc)}
         return {"ok": False, "error": f"unknown command {cmd!r}"}
 
-    def stats(self) -> dict[str, Any]:
+    def actor_state(self, actor: str) -> dict[str, int]:
+        """An actor's progress as this server knows it: ``env_steps`` of its newest batch and the
+        ``next_seq`` it should send. A restarted actor resumes there, so its budget is neither
+        spent twice nor lost, and its sequence numbers go on (gaps are counted as lost)."""
         with self._lock:
+            stats = self.actors.get(actor)
+            if stats is None:
+                return {"env_steps": 0, "next_seq": 0, "known": 0}
+            return {"env_steps": int(stats["env_steps"]), "next_seq": int(stats["last_seq"]) + 1, "known": 1}
+
+    def actor_page(self, offset: int = 0, limit: int = MAX_ACTOR_PAGE) -> dict[str, Any]:
+        """Per-actor stats, ``limit`` (at most MAX_ACTOR_PAGE) actors from ``offset`` in name order."""
+        offset, limit = max(0, int(offset)), max(1, min(int(limit), MAX_ACTOR_PAGE))
+        with self._lock:
+            names = sorted(self.actors)[offset:offset + limit]
+            return {"total": len(self.actors), "offset": offset,
+                    "actors": {n: dict(self.actors[n]) for n in names}}
+
+    def _actors_total(self) -> dict[str, int]:
+        """Sums over every actor (called under the lock)."""
+        keys = ("batches", "items", "stored", "lost_batches", "lost_items", "env_steps")
+        total = {k: sum(int(a.get(k, 0)) for a in self.actors.values()) for k in keys}
+        versions = [int(a["last_version"]) for a in self.actors.values()]
+        return {"count": len(self.actors), **total, "min_version": min(versions, default=-1),
+                "max_version": max(versions, default=-1)}
+
+    def stats(self, all_actors: bool = False) -> dict[str, Any]:
+        """Counters of everything. ``actors`` lists the first ACTORS_IN_STATS actors by name
+        (``all_actors`` lists all: for files and the in-process HTTP views, never for a reply)."""
+        with self._lock:
+            shown = sorted(self.actors) if all_actors else sorted(self.actors)[:ACTORS_IN_STATS]
             online_size = self.online.size
             demo_in_buffer = self.demo.size if self.demos_sampled else 0
             total = online_size + demo_in_buffer
@@ -308,6 +357,7 @@ class ReplayCore:
             return {
                 "mode": self.mode,
                 "phase": self.phase,
+                "http_url": self.http_url,
                 "uptime_s": round(time.monotonic() - self.started, 3),
                 "tables": {
                     "online": {"size": online_size, "capacity": self.online.capacity, "inserted": self.online.inserted,
@@ -324,11 +374,13 @@ class ReplayCore:
                             "max_priority": self._max_priority if self.prioritized else None},
                 "rejected": dict(self.rejected),
                 "dropped": dict(self.dropped),
-                "actors": {k: dict(v) for k, v in self.actors.items()},
+                "actors": {k: dict(self.actors[k]) for k in shown},
+                "actors_total": self._actors_total(),
                 "rates": self._rates.rates(),
                 "checkpoint": {**self.last_checkpoint,
-                               "age_s": round(time.monotonic() - self.last_checkpoint["monotonic"], 1)}
-                if self.last_checkpoint else None,
+                               "age_s": round(time.monotonic() - self.last_checkpoint["monotonic"], 1),
+                               "failures": self.checkpoint_failures}
+                if self.last_checkpoint else ({"failures": self.checkpoint_failures} if self.checkpoint_failures else None),
                 "rate_limiter": self.limiter.state(size=online_size, inserts=self.online.inserted,
                                                    samples=self.samples),
             }

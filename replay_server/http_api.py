@@ -40,7 +40,7 @@ from fastapi import FastAPI, HTTPException, Query
 from fastapi.responses import JSONResponse, Response
 from pydantic import BaseModel, Field
 
-from .core import ReplayCore
+from .core import MAX_ACTOR_PAGE, ReplayCore
 
 TABLES = ("online", "demo")
 DEFAULT_LIMIT = 10
@@ -190,7 +190,7 @@ def _table_views(core: ReplayCore, stats: dict) -> dict[str, dict]:
 
 def full_stats(core: ReplayCore) -> dict:
     """``core.stats()`` unchanged, with each table's per-table view merged into ``tables.<name>``."""
-    stats = core.stats()
+    stats = core.stats(all_actors=True)
     views = _table_views(core, stats)
     for name, view in views.items():
         table = stats["tables"].setdefault(name, {})
@@ -351,6 +351,8 @@ def render_metrics(stats: dict) -> str:
             ("stored", "counter", "actor_stored_total", "Items stored, by actor."),
             ("batches", "counter", "actor_batches_total", "Transition messages received, by actor."),
             ("lost_batches", "counter", "actor_lost_batches_total", "Messages missing from the sequence, by actor."),
+            ("lost_items", "counter", "actor_lost_items_total",
+             "Items in the missing messages (from the actor's env-step count), by actor."),
             ("last_version", "gauge", "actor_weights_version", "Newest weights version an actor acted with."),
             ("env_steps", "gauge", "actor_env_steps", "An actor's cumulative env steps.")):
         m.metric(name, kind, help_text, [({"actor": a}, s.get(field)) for a, s in actors])
@@ -414,6 +416,13 @@ def make_app(core: ReplayCore) -> FastAPI:
         if name not in TABLES:
             raise HTTPException(404, f"unknown table {name!r}; tables: {', '.join(TABLES)}")
         return SafeJSONResponse(read_items(core, name, offset, min(limit, MAX_LIMIT), include_obs))
+
+    @app.get("/actors", response_model=None)
+    def actors(offset: int = Query(0, ge=0, description="actors to skip, in name order"),
+               limit: int = Query(MAX_ACTOR_PAGE, ge=1, description=f"actors to return (at most {MAX_ACTOR_PAGE})")
+               ) -> Response:
+        """Per-actor counters, a page at a time: ``{"total", "offset", "actors": {name: {...}}}``."""
+        return SafeJSONResponse(core.actor_page(offset, limit))
 
     @app.get("/demo", response_model=None)
     def demo() -> Response:

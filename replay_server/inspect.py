@@ -13,7 +13,8 @@ from laneshift.config import TransportConfig
 def render(stats: dict) -> str:
     t = stats["tables"]
     lines = [
-        f"mode {stats['mode']}  phase {stats['phase']}  uptime {stats['uptime_s']:.0f} s",
+        f"mode {stats['mode']}  phase {stats['phase']}  uptime {stats['uptime_s']:.0f} s"
+        f"  HTTP API {stats.get('http_url') or 'off'}",
         f"{'table':<8}{'size':>10}{'capacity':>10}{'inserted':>12}{'MiB':>8}",
         f"{'online':<8}{t['online']['size']:>10,}{t['online']['capacity']:>10,}{t['online']['inserted']:>12,}"
         f"{t['online']['bytes'] / 2**20:>8.1f}",
@@ -27,6 +28,12 @@ def render(stats: dict) -> str:
     for name, a in sorted(stats["actors"].items()):
         lines.append(f"{name:<10}{a['batches']:>9,}{a['items']:>10,}{a['stored']:>10,}{a['lost_batches']:>6}"
                      f"{a['last_version']:>9}{a['env_steps']:>11,}")
+    total = stats.get("actors_total")
+    if total:
+        more = total["count"] - len(stats["actors"])
+        lines.append(f"{'all ' + str(total['count']):<10}{total['batches']:>9,}{total['items']:>10,}{total['stored']:>10,}"
+                     f"{total['lost_batches']:>6}{total['max_version']:>9}{total['env_steps']:>11,}"
+                     + (f"   ({more} more actors: /actors of the HTTP API)" if more > 0 else ""))
     return "\n".join(lines)
 
 

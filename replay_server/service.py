@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import sys
 import threading
@@ -114,8 +115,12 @@ class ReplayService:
         with self._checkpoint_lock:
             try:
                 info = write_checkpoint(self.core, self.checkpoint_dir)
-            except OSError as exc:  # a full disk must not take the server down: report and go on
-                print(f"replay-server: checkpoint failed: {exc}", file=sys.stderr, flush=True)
+            except OSError as exc:  # a full disk must not take the server down: report, count, retry later
+                self.core.checkpoint_failures += 1
+                shutil.rmtree(self.checkpoint_dir.with_name(self.checkpoint_dir.name + ".tmp"), ignore_errors=True)
+                print(f"replay-server: checkpoint failed ({exc}); serving on, the previous checkpoint stays valid, "
+                      f"retrying in {self.checkpoint_every_s:g} s ({self.core.checkpoint_failures} failed so far)",
+                      file=sys.stderr, flush=True)
                 return None
         self.core.last_checkpoint = {**info, "monotonic": time.monotonic()}
         return info
@@ -142,61 +147,115 @@ def build_core(cfg: RunConfig) -> ReplayCore:
     return ReplayCore(cfg.replay, spec.schema, demo)
 
 
-def run_replay_server(cfg: RunConfig, *, embedded_router: bool = False, ready_file: str | None = None) -> int:
-    """Serve until SIGINT/SIGTERM. Writes ``ready_file`` (JSON) once it is serving."""
-    try:
-        core = build_core(cfg)
-    except ValueError as exc:  # config or shard mismatch: refuse to start, naming the problem
-        print(f"replay-server: {exc}", file=sys.stderr)
-        return 2
-    demo_digest = core.demo.digest()
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
-    checkpoint_dir = Path(cfg.train.run_dir) / "replay_checkpoint"
-    if cfg.replay.restore and (checkpoint_dir / "meta.json").exists():
-        try:
-            restored = restore_checkpoint(core, checkpoint_dir)
-        except CheckpointError as exc:
-            print(f"replay-server: {exc}; remove it or start with replay.restore=false", file=sys.stderr)
-            return 2
-        print(f"replay-server: restored {restored} items from {checkpoint_dir}", flush=True)
-    mode = "router" if embedded_router else "client"
-    transport.use_service_runtime()
-    with transport.open_session(cfg.transport, mode=mode) as session, \
-            transport.open_session(cfg.transport, mode="client") as ingest_session:
-        service = ReplayService(core, session, cfg.transport.run_id, checkpoint_dir,
-                                cfg.replay.checkpoint_every_s, ingest_session).start()
-        http_port = None
+def config_digest(cfg: RunConfig) -> str:
+    """What a replay checkpoint must match to be restored: the env and the table layout.
+    (Not the router endpoint or ports: those change when a run is resumed.)"""
+    import hashlib
+
+    key = {"env": cfg.to_dict()["env"], "capacity": cfg.replay.capacity, "demo_mode": cfg.replay.demo_mode,
+           "demo_ratio": cfg.replay.demo_ratio, "n_step": cfg.learner.n_step}
+    return hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
+
+
+class ReplayServer:
+    """The whole replay server of a run: core, checkpoint restore, zenoh service, HTTP API.
+
+    ``start()`` returns once it serves; ``stop()`` writes the final checkpoint and
+    ``replay_stats.json`` and returns the final stats. The ``laneshift replay-server`` process and
+    the Ray actor (``deploy.actors``) both run this.
+    """
+
+    def __init__(self, cfg: RunConfig, embedded_router: bool = False):
+        self.cfg, self.embedded_router = cfg, embedded_router
+        self.http_port: int | None = None
+        self.restored = 0
+        self._stop = threading.Event()
+        self._sessions: list[zenoh.Session] = []
+
+    def start(self) -> dict:
+        cfg = self.cfg
+        self.core = core = build_core(cfg)  # ValueError: config or shard mismatch, named
+        core.identity = {"run_id": cfg.transport.run_id, "config_digest": config_digest(cfg)}
+        self.demo_digest = core.demo.digest()
+        self.checkpoint_dir = Path(cfg.train.run_dir) / "replay_checkpoint"
+        if cfg.replay.restore and (self.checkpoint_dir / "meta.json").exists():
+            self.restored = restore_checkpoint(core, self.checkpoint_dir)  # CheckpointError: named
+            print(f"replay-server: restored {self.restored} items from {self.checkpoint_dir}", flush=True)
+        transport.use_service_runtime()
+        mode = "router" if self.embedded_router else "client"
+        session = transport.open_session(cfg.transport, mode=mode)
+        ingest_session = transport.open_session(cfg.transport, mode="client")
+        self._sessions = [ingest_session, session]
+        self.service = ReplayService(core, session, cfg.transport.run_id, self.checkpoint_dir,
+                                     cfg.replay.checkpoint_every_s, ingest_session).start()
         if cfg.replay.http_port >= 0:
             from .http_api import serve_http  # imported only when asked for: fastapi takes a while
 
             try:
-                http_thread, http_port = serve_http(core, cfg.replay.http_host, cfg.replay.http_port, stop)
+                _, self.http_port = serve_http(core, cfg.replay.http_host, cfg.replay.http_port, self._stop)
             except OSError as exc:
-                print(f"replay-server: replay.http_port {cfg.replay.http_port}: {exc}", file=sys.stderr)
-                service.stop()
-                return 2
-            print(f"replay-server: HTTP inspection API on http://{cfg.replay.http_host}:{http_port} "
+                self.close()
+                raise OSError(f"replay.http_port {cfg.replay.http_port}: {exc}") from None
+            shown = cfg.replay.http_host
+            if shown in ("0.0.0.0", "::"):  # bound everywhere: name an address others can use
+                shown = cfg.transport.router.split("/", 1)[1].rsplit(":", 1)[0]
+            core.http_url = f"http://{shown}:{self.http_port}"
+            print(f"replay-server: HTTP inspection API on http://{cfg.replay.http_host}:{self.http_port} "
                   f"(/stats, /metrics, /docs)", flush=True)
         stats = core.stats()
         print(f"replay-server: serving run {cfg.transport.run_id!r} on {cfg.transport.router} "
               f"(mode {core.mode}, online capacity {core.online.capacity}, demo items {core.demo.size}, "
               f"demo sha256 {stats['tables']['demo']['sha256'][:12] or '-'})", flush=True)
-        if ready_file:
-            Path(ready_file).write_text(json.dumps({"pid": os.getpid(), "time": time.time(), "http_port": http_port}))
-        while not stop.wait(0.5):
-            pass
-        service.stop()
-        final_ckpt = service.checkpoint()  # SIGTERM/SIGINT: keep everything received
+        return {"http_port": self.http_port, "restored": self.restored}
+
+    def stop(self) -> dict:
+        """Final checkpoint (SIGTERM/SIGINT keep everything received), stats file, sessions closed."""
+        self._stop.set()
+        self.service.stop()
+        final_ckpt = self.service.checkpoint()
         if final_ckpt:
             print(f"replay-server: final checkpoint of {final_ckpt['items']} items in {final_ckpt['seconds']} s",
                   flush=True)
-    final = core.stats()
-    final["demo_digest_start"], final["demo_digest_end"] = demo_digest, core.demo.digest()
-    out = Path(cfg.train.run_dir) / "replay_stats.json"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(final, indent=2))
-    print(f"replay-server: stopped; stored {final['tables']['online']['inserted']} items, "
-          f"rejected {sum(final['rejected'].values())}", flush=True)
+        self.close()
+        final = self.core.stats(all_actors=True)  # a file, not a reply: every actor
+        final["demo_digest_start"], final["demo_digest_end"] = self.demo_digest, self.core.demo.digest()
+        out = Path(self.cfg.train.run_dir) / "replay_stats.json"
+        try:
+            out.parent.mkdir(parents=True, exist_ok=True)
+            out.write_text(json.dumps(final, indent=2))
+        except OSError as exc:
+            print(f"replay-server: could not write {out}: {exc}", file=sys.stderr, flush=True)
+        print(f"replay-server: stopped; stored {final['tables']['online']['inserted']} items, "
+              f"rejected {sum(final['rejected'].values())}", flush=True)
+        return final
+
+    def close(self) -> None:
+        self._stop.set()
+        for session in self._sessions:
+            try:
+                session.close()
+            except Exception:  # noqa: BLE001 - closing twice, or a session already gone
+                pass
+        self._sessions = []
+
+
+def run_replay_server(cfg: RunConfig, *, embedded_router: bool = False, ready_file: str | None = None) -> int:
+    """Serve until SIGINT/SIGTERM. Writes ``ready_file`` (JSON) once it is serving."""
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    server = ReplayServer(cfg, embedded_router)
+    try:
+        info = server.start()
+    except CheckpointError as exc:
+        print(f"replay-server: {exc}; remove it or start with replay.restore=false", file=sys.stderr)
+        return 2
+    except (ValueError, OSError) as exc:  # config or shard mismatch, or the HTTP port: refuse, naming it
+        print(f"replay-server: {exc}", file=sys.stderr)
+        return 2
+    if ready_file:
+        Path(ready_file).write_text(json.dumps({"pid": os.getpid(), "time": time.time(), "http_port": info["http_port"]}))
+    while not stop.wait(0.5):
+        pass
+    server.stop()
     return 0

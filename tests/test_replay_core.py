@@ -329,12 +329,13 @@ def test_per_actor_counters_and_seq_gaps():
     core = make_core(capacity=1000)
     for seq, version in ((0, 0), (1, 1), (4, 3), (3, 2), (4, 3), (5, 2)):
         assert core.ingest(tmsg("w0", seq, rows=4, start=seq * 4, version=version, env_steps=(seq + 1) * 4), "w0") is None
-    assert core.ingest(tmsg("w1", 7, rows=2, start=500, env_steps=2), "w1") is None  # first seen at seq 7: no loss
+    # First seen at seq 7: its 7 earlier batches (14 env steps before this one) never arrived here.
+    assert core.ingest(tmsg("w1", 7, rows=2, start=500, env_steps=16), "w1") is None
     a = core.stats()["actors"]
-    assert a["w0"] == {"batches": 6, "items": 24, "stored": 24, "last_seq": 5, "lost_batches": 2,
+    assert a["w0"] == {"batches": 6, "items": 24, "stored": 24, "last_seq": 5, "lost_batches": 2, "lost_items": 8,
                        "last_version": 3, "env_steps": 24}
-    assert a["w1"] == {"batches": 1, "items": 2, "stored": 2, "last_seq": 7, "lost_batches": 0,
-                       "last_version": 0, "env_steps": 2}
+    assert a["w1"] == {"batches": 1, "items": 2, "stored": 2, "last_seq": 7, "lost_batches": 7, "lost_items": 14,
+                       "last_version": 0, "env_steps": 16}
     # The ring remembers which actor (index in order of appearance) and version made each item.
     assert core.online.actor[24] == 1 and core.online.version[8] == 3
 
@@ -588,7 +589,7 @@ def test_stats_shape_is_json_and_complete():
     fill(core, 300)
     sample_ok(core, SampleRequest(32))
     s = core.stats()
-    assert set(s) == {"mode", "phase", "uptime_s", "tables", "demo_share_buffer", "demo_share_recent_samples",
+    assert set(s) == {"mode", "phase", "http_url", "uptime_s", "actors_total", "tables", "demo_share_buffer", "demo_share_recent_samples",
                       "sampled_rows", "sampled_demo_rows", "requests", "rejected", "dropped", "actors", "rates",
                       "rate_limiter", "checkpoint", "sampler"}
     assert s["tables"]["online"] == {"size": 300, "capacity": 900, "inserted": 300, "bytes": core.online.nbytes}

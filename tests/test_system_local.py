@@ -209,7 +209,7 @@ def test_sigint_leaves_no_process_behind(tmp_path):
         proc.send_signal(signal.SIGINT)
         rest, _ = proc.communicate(timeout=90)
         assert proc.returncode == 130, "".join(lines) + rest
-        assert "interrupted" in rest
+        assert "SIGINT received; stopping gracefully" in rest
         deadline = time.monotonic() + 30
         while time.monotonic() < deadline and any(_alive(p) for p in family):
             time.sleep(0.2)
@@ -217,46 +217,6 @@ def test_sigint_leaves_no_process_behind(tmp_path):
     finally:
         if proc.poll() is None:
             proc.kill()
-
-
-def test_replay_server_killed_mid_run_is_restarted_and_the_run_completes(tmp_path):
-    """kill -9 of the replay server: the launcher restarts it, it restores its checkpoint, actors
-    and learner carry on through the router, and what was in flight is counted, not hidden."""
-    from laneshift.deploy import local
-
-    killed = {}
-    real = local._supervise_replay_server
-
-    def kill_once(group, out):
-        proc = group.procs["replay-server"]
-        meta = tmp_path / "run" / "replay_checkpoint" / "meta.json"
-        if not killed and meta.exists() and json.loads(meta.read_text())["items"] >= 1000:  # mid-stream
-            os.kill(proc.pid, signal.SIGKILL)
-            proc.wait(10)
-            killed["pid"] = proc.pid
-        real(group, out)
-
-    local._supervise_replay_server = kill_once
-    try:
-        run_dir, summary, replay = run(tmp_path, **{"train.env_steps": 8000, "replay.checkpoint_every_s": 0.5,
-                                                    "replay.min_size": 200, "train.log_every_s": 0.5})
-    finally:
-        local._supervise_replay_server = real
-    assert killed, "the replay server was never killed: no checkpoint appeared"
-    assert sum(w["env_steps"] for w in summary["workers"]) == 8000  # every worker finished its budget
-    stored = replay["tables"]["online"]["inserted"]
-    actors = replay["actors"]
-    lost = sum(a["lost_batches"] for a in actors.values())
-    # Batches sent after the last one the server saw (an actor that ended while it was down).
-    tail = sum(w["batches"] - 1 - actors[w["name"]]["last_seq"] for w in summary["workers"])
-    # Losing nothing is possible: actors held back by the rate limiter wait for the next flow
-    # message, which only the restarted server sends (seen once in about ten runs under load).
-    assert 0 < stored <= 8000
-    # Every transition is stored or counted as lost, exactly, but for at most one batch per actor
-    # that a checkpoint caught in part (its chunks were copied on both sides of the insert).
-    assert 8000 - 2 * 50 <= stored + 50 * (lost + tail) <= 8000, (stored, lost, tail)
-    log = (run_dir / "logs" / "replay-server.log").read_text()
-    assert "restored" in log
 
 
 def test_cluster_mode_spreads_workers_over_two_ray_nodes(tmp_path, monkeypatch):
@@ -275,14 +235,18 @@ def test_cluster_mode_spreads_workers_over_two_ray_nodes(tmp_path, monkeypatch):
     # The cluster helper records its address in /tmp/ray/ray_current_cluster; keep /tmp/ray untouched.
     monkeypatch.setattr(ray._private.utils, "write_ray_address", lambda *a, **k: None)
     ray_tmp = tempfile.mkdtemp(prefix="lsc-")  # short: Ray's unix socket paths must stay < 108 chars
+    # The head offers what the services ask for; each node has room for one env worker.
     cluster = Cluster(initialize_head=True,
-                      head_node_args={"num_cpus": 1, "temp_dir": ray_tmp, "include_dashboard": False})
+                      head_node_args={"num_cpus": 1, "temp_dir": ray_tmp, "include_dashboard": False,
+                                      "resources": {"laneshift_replay": 1, "laneshift_learner": 1}})
     try:
         cluster.add_node(num_cpus=1, temp_dir=ray_tmp)
         cluster.wait_for_nodes()
         run_dir = tmp_path / "run"
-        cfg = load_run_config(overrides={**FAST, "train.run_dir": str(run_dir), "train.env_steps": 4000,
-                                         "replay.min_size": 200})
+        cfg = load_run_config(overrides={
+            **FAST, "train.run_dir": str(run_dir), "train.env_steps": 4000, "replay.min_size": 200,
+            "deploy.replay_cpus": 0, "deploy.learner_cpus": 0, "deploy.router_resources": '{"laneshift_replay": 0.01}',
+            "deploy.replay_resources": '{"laneshift_replay": 0.5}', "deploy.learner_resources": '{"laneshift_learner": 1}'})
         out = io.StringIO()
         assert train_cluster(cfg, cluster.address, out=out) == 0, out.getvalue()
     finally:
@@ -292,7 +256,9 @@ def test_cluster_mode_spreads_workers_over_two_ray_nodes(tmp_path, monkeypatch):
     replay = json.loads((run_dir / "replay_stats.json").read_text())
     nodes = {w["name"]: w["node"] for w in summary["workers"]}
     assert set(nodes) == {"w0", "w1"} and len(set(nodes.values())) == 2, nodes
-    assert "ray nodes       2 (" in out.getvalue()
+    head = summary["placement"]["replay-server"]["node_id"]
+    assert summary["placement"]["learner"]["node_id"] == summary["placement"]["router"]["node_id"] == head
+    assert summary["replay"]["lost_items"] == 0
     for w in summary["workers"]:
         assert replay["actors"][w["name"]]["items"] == w["env_steps"] > 0
     assert sum(w["env_steps"] for w in summary["workers"]) == 4000

@@ -27,7 +27,7 @@ def _add_config_args(p: argparse.ArgumentParser) -> None:
 
 
 def _config_from(args: argparse.Namespace, shortcuts: dict[str, Any] | None = None,
-                 preset: dict[str, Any] | None = None) -> RunConfig:
+                 preset: dict[str, Any] | None = None, base: RunConfig | None = None) -> RunConfig:
     """``--config`` file < ``preset`` (a named method's settings) < flag shortcuts < ``--set``."""
     overrides: dict[str, Any] = dict(preset or {})
     overrides.update({k: v for k, v in (shortcuts or {}).items() if v is not None})
@@ -36,37 +36,59 @@ def _config_from(args: argparse.Namespace, shortcuts: dict[str, Any] | None = No
         if not sep:
             raise ConfigError(f"--set {item!r}: write SECTION.FIELD=VALUE")
         overrides[key.strip()] = value
-    return load_run_config(args.config, overrides)
+    return load_run_config(args.config, overrides, base=base)
 
 
 # ---------------------------------------------------------------------------- train
 
 
 def _train(args: argparse.Namespace) -> int:
+    import os
+
     preset = None
     if args.method:
         from laneshift.experiments import method_settings
 
         preset = method_settings(args.method, "--method")
-    cfg = _config_from(args, {
+    shortcuts = {
         "actor.workers": args.workers, "env.scenario": args.scenario, "replay.demo_mode": args.mode,
         "train.env_steps": args.env_steps, "train.run_dir": args.run_dir, "train.parallel": args.parallel,
-        "env.observation": args.observation, "replay.demo_paths": args.demos, "transport.run_id": args.run_id},
-        preset)
-    if args.cluster:
+        "env.observation": args.observation, "replay.demo_paths": args.demos, "transport.run_id": args.run_id}
+    resume = args.resume is not None
+    if resume:  # the saved run's config, with this command's flags on top
+        saved = Path(args.resume) / "config.yaml"
+        if not saved.exists():
+            print(f"laneshift train: --resume {args.resume}: no run there (no config.yaml)", file=sys.stderr)
+            return 2
+        if args.run_dir and Path(args.run_dir).resolve() != Path(args.resume).resolve():
+            print("laneshift train: --resume names the run dir; leave out --run-dir", file=sys.stderr)
+            return 2
+        shortcuts["train.run_dir"] = args.resume
+        cfg = _config_from(args, shortcuts, preset, base=load_run_config(saved))
+    else:
+        cfg = _config_from(args, shortcuts, preset)
+    address = args.cluster
+    if address is None and not args.local and os.environ.get("RAY_ADDRESS"):
+        # Inside `ray job submit` (or with RAY_ADDRESS exported): run on that cluster.
+        address = "auto"
+        print(f"laneshift train: RAY_ADDRESS={os.environ['RAY_ADDRESS']}: running on that Ray cluster "
+              f"(--local for a private one on this machine)", flush=True)
+    if address:
         from laneshift.deploy.cluster import train_cluster
 
-        return train_cluster(cfg, address=args.cluster)
+        return train_cluster(cfg, address=address, resume=resume, overwrite=args.overwrite)
     from laneshift.deploy.local import train_local
 
-    return train_local(cfg)
+    return train_local(cfg, resume=resume, overwrite=args.overwrite)
 
 
 def _add_train(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("train", help="train: local single-machine mode or on a Ray cluster")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--local", action="store_true", help="everything on this machine (the default)")
-    where.add_argument("--cluster", metavar="ADDRESS", help="a running Ray cluster, e.g. ray://head:10001 or auto")
+    where.add_argument("--cluster", metavar="ADDRESS",
+                       help="a running Ray cluster: auto (RAY_ADDRESS or this node's cluster), HOST:PORT, "
+                            "or ray://HOST:10001")
     p.add_argument("--workers", type=int, help="env workers (Ray actors)")
     p.add_argument("--scenario", help="straight | merge | curve | roundabout | lka")
     p.add_argument("--mode", choices=["none", "retention", "rehearsal", "dqfd"],
@@ -80,6 +102,11 @@ def _add_train(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--demos", help="demo shard dir(s), comma separated (default: scripted, generated if absent)")
     p.add_argument("--run-dir", help="where checkpoints, logs, TensorBoard files and config go")
     p.add_argument("--run-id", help="zenoh key namespace (laneshift/<run-id>/...)")
+    again = p.add_mutually_exclusive_group()
+    again.add_argument("--resume", metavar="RUN_DIR",
+                       help="continue a stopped or killed run from its checkpoints (learner state, replay table, "
+                            "each worker's remaining budget); flags and --set apply on top of its config")
+    again.add_argument("--overwrite", action="store_true", help="start over in a run dir that already holds a run")
     _add_config_args(p)
     p.set_defaults(func=_train)
 
@@ -211,9 +238,14 @@ def build_parser() -> argparse.ArgumentParser:
     bench_sub = bench.add_subparsers(dest="bench_cmd", required=True, metavar="WHAT")
     from laneshift.bench_env import register as register_bench_env
     from laneshift.bench_replay import register as register_bench_replay
+    from laneshift.bench_learner import register as register_bench_learner
 
     register_bench_env(bench_sub)
     register_bench_replay(bench_sub)
+    register_bench_learner(bench_sub)
+    from laneshift.deploy.chaos import register as register_chaos
+
+    register_chaos(sub)
     return parser
 
 

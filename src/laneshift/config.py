@@ -218,6 +218,10 @@ class LearnerConfig:
     updates_per_round: int = 8  # sync: updates per round of worker batches
     phase1_updates: int = 2_000  # rehearsal: demo-only updates before phase 2
     checkpoint_every: int = 5_000  # updates between checkpoints in the run dir
+    # Full training state (online + target nets, optimizer, update count, weights version) written
+    # at least this often, so a restarted learner loses at most this much work. 0 = only at stop.
+    checkpoint_every_s: float = 30.0
+    device: str = "auto"  # auto (cuda when torch sees a GPU) | cpu | cuda
     # Also keep each periodic checkpoint as checkpoints/u<updates>.safetensors (learning curves of
     # greedy scores: `laneshift experiment checkpoints`); off: only latest/final are kept.
     keep_checkpoints: bool = False
@@ -244,6 +248,8 @@ class LearnerConfig:
         _check(self.margin >= 0, "learner.margin", "must be >= 0", self.margin)
         _check(self.bc_loss_weight >= 0, "learner.bc_loss_weight", "must be >= 0", self.bc_loss_weight)
         _check(self.seed >= 0, "learner.seed", "must be >= 0", self.seed)
+        _check(self.checkpoint_every_s >= 0, "learner.checkpoint_every_s", "must be >= 0", self.checkpoint_every_s)
+        _check(self.device in ("auto", "cpu", "cuda"), "learner.device", "must be auto, cpu or cuda", self.device)
 
 
 @dataclass(frozen=True)
@@ -292,6 +298,55 @@ class TrainConfig:
 
 
 @dataclass(frozen=True)
+class DeployConfig:
+    """Where each component runs: Ray actor resources, the router's address, supervision.
+
+    Every component (zenoh router, replay server, learner, env workers) is a Ray actor, each its
+    own process; these fields are its Ray options. Custom resources place a component on a
+    node that offers them (``ray start --resources '{"laneshift_replay": 1}'``); ``GPU`` in
+    ``learner_resources`` becomes the learner's ``num_gpus``.
+    """
+
+    # The router listens on this port on its node. 0: a free port (local mode) or 7447 (cluster).
+    router_port: int = 0
+    # The address the router listens on and every client connects to. "" = the address Ray
+    # registered for the router's node (``ray start --node-ip-address``), 127.0.0.1 in local mode.
+    advertise_host: str = ""
+    # The endpoint env workers connect to, when not the run's router itself: a relay or proxy in
+    # front of it (e.g. a router per node meshed with the run's, or the chaos suite's slow link).
+    worker_router: str = ""
+    router_cpus: float = 0.0
+    replay_cpus: float = 1.0
+    learner_cpus: float = 1.0
+    worker_cpus: float = 1.0
+    router_resources: dict[str, float] = field(default_factory=dict)
+    replay_resources: dict[str, float] = field(default_factory=dict)
+    learner_resources: dict[str, float] = field(default_factory=dict)
+    worker_resources: dict[str, float] = field(default_factory=dict)
+    # Ray restarts a component that died this many times (the run fails after that).
+    max_restarts: int = 5
+    start_timeout_s: float = 180.0  # a component that is not serving by then fails the run, named
+    # No transition stored for this long while workers run: fail with a message instead of waiting forever.
+    stall_timeout_s: float = 300.0
+
+    def __post_init__(self) -> None:
+        _check(0 <= self.router_port <= 65535, "deploy.router_port", "must be 0 (default) or a port",
+               self.router_port)
+        _check(self.worker_router == "" or self.worker_router.startswith(("tcp/", "udp/")), "deploy.worker_router",
+               "must be empty or a zenoh endpoint like tcp/10.0.0.5:7447", self.worker_router)
+        for name in ("router_cpus", "replay_cpus", "learner_cpus", "worker_cpus"):
+            _check(getattr(self, name) >= 0, f"deploy.{name}", "must be >= 0", getattr(self, name))
+        for name in ("router_resources", "replay_resources", "learner_resources", "worker_resources"):
+            res = getattr(self, name)
+            _check(all(isinstance(k, str) and k and isinstance(v, (int, float)) and v >= 0 for k, v in res.items()),
+                   f"deploy.{name}", "must map resource names to amounts >= 0", res)
+            _check("CPU" not in res, f"deploy.{name}", "must not name CPU (use deploy.*_cpus)", res)
+        _check(self.max_restarts >= 0, "deploy.max_restarts", "must be >= 0", self.max_restarts)
+        _check(self.start_timeout_s > 0, "deploy.start_timeout_s", "must be > 0", self.start_timeout_s)
+        _check(self.stall_timeout_s > 0, "deploy.stall_timeout_s", "must be > 0", self.stall_timeout_s)
+
+
+@dataclass(frozen=True)
 class RunConfig:
     env: EnvConfig = field(default_factory=EnvConfig)
     actor: ActorConfig = field(default_factory=ActorConfig)
@@ -299,6 +354,7 @@ class RunConfig:
     learner: LearnerConfig = field(default_factory=LearnerConfig)
     transport: TransportConfig = field(default_factory=TransportConfig)
     train: TrainConfig = field(default_factory=TrainConfig)
+    deploy: DeployConfig = field(default_factory=DeployConfig)
 
     def __post_init__(self) -> None:
         rows = self.learner.batch_size * max(self.learner.prefetch, self.learner.updates_per_round)
@@ -318,17 +374,44 @@ class RunConfig:
         return dataclasses.replace(self, **sections)
 
 
+def worker_names(n: int) -> list[str]:
+    """Env workers' names, used in key expressions, stats and Ray actor names: w0, w1, ..."""
+    return [f"w{i}" for i in range(n)]
+
+
+def worker_budgets(total: int, n: int) -> list[int]:
+    """The run's env-step budget split over ``n`` workers (the first ones take the remainder)."""
+    return [total // n + (i < total % n) for i in range(n)]
+
+
 SECTIONS: dict[str, type] = {"env": EnvConfig, "actor": ActorConfig, "replay": ReplayConfig, "learner": LearnerConfig,
-            "transport": TransportConfig, "train": TrainConfig}
+            "transport": TransportConfig, "train": TrainConfig, "deploy": DeployConfig}
 
 
 def _plain(d: Mapping[str, Any]) -> dict[str, Any]:
-    return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
+    return {k: list(v) if isinstance(v, tuple) else dict(v) if isinstance(v, dict) else v for k, v in d.items()}
 
 
 def _coerce(where: str, typ: Any, value: Any) -> Any:
     """Turn a YAML/TOML/CLI value into ``typ``; strings from the CLI are parsed."""
     origin = typing.get_origin(typ)
+    if origin is dict:  # resource maps: YAML/JSON mappings, or '{"GPU": 1}' / 'GPU=1,big_mem=1' from the CLI
+        if isinstance(value, str):
+            text = value.strip()
+            if text.startswith("{"):
+                try:
+                    value = json.loads(text)
+                except json.JSONDecodeError:
+                    raise ConfigError(f"{where}: not a JSON mapping, got {value!r}") from None
+            else:
+                pairs = [p.partition("=") for p in text.split(",") if p.strip()]
+                if any(not sep for _, sep, _ in pairs):
+                    raise ConfigError(f"{where}: write NAME=AMOUNT[,NAME=AMOUNT] or a JSON mapping, got {value!r}")
+                value = {k.strip(): v.strip() for k, _, v in pairs}
+        if not isinstance(value, Mapping):
+            raise ConfigError(f"{where}: must be a mapping, got {value!r}")
+        _, val_t = typing.get_args(typ)
+        return {str(k): _coerce(f"{where}.{k}", val_t, v) for k, v in value.items()}
     if origin is tuple:
         (item,) = {a for a in typing.get_args(typ) if a is not Ellipsis}
         if isinstance(value, str):

@@ -1,0 +1,227 @@
+"""The run's components as Ray actors: each its own OS process, placed and restarted by Ray.
+
+What it is: thin Ray shells around what ``deploy.builder.Builder`` builds. Every actor has the
+same shape, so the launcher supervises them all alike:
+
+- the constructor builds and starts the component (after a crash Ray runs it again, and the
+  component restores its own checkpoint: replay table, learner state, the router's endpoint);
+- ``run()`` blocks while the component works (an env worker: until its budget is spent) and
+  fails with ``RayActorError`` if the process dies, which is how the launcher learns of it;
+- ``info()`` says where it runs; ``stop()`` ends it gracefully (threaded actors, so ``stop()``
+  runs beside ``run()``).
+
+Each actor writes its output to ``<run dir>/logs/<component>.log`` on its node.
+May import: the contract, ``deploy.builder``, Ray; components only through the builder.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import threading
+import time
+import warnings
+from pathlib import Path
+from typing import Any
+
+import ray
+
+from laneshift.config import RunConfig, load_run_config
+
+from .builder import Builder
+
+
+def _config(plain: dict) -> RunConfig:
+    return load_run_config(overrides={f"{s}.{k}": v for s, body in plain.items() for k, v in body.items()})
+
+
+def _log_to_run_dir(cfg: RunConfig, component: str) -> None:
+    """Send this process's stdout and stderr (Python's and native code's) to the run's log file."""
+    path = Path(cfg.train.run_dir) / "logs" / f"{component}.log"
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
+    except OSError as exc:  # an unwritable run dir: keep Ray's own worker log instead
+        print(f"{component}: cannot log to {path}: {exc}", file=sys.stderr, flush=True)
+        return
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os.dup2(fd, 1)
+    os.dup2(fd, 2)
+    os.close(fd)
+    sys.stdout = os.fdopen(1, "w", buffering=1, closefd=False)
+    sys.stderr = os.fdopen(2, "w", buffering=1, closefd=False)
+
+
+def _write_pid(cfg: RunConfig, component: str) -> None:
+    """``<run dir>/logs/<component>.pid``: which process to look at (or to kill, in the chaos suite)."""
+    try:
+        (Path(cfg.train.run_dir) / "logs" / f"{component}.pid").write_text(str(os.getpid()))
+    except OSError:
+        pass
+
+
+def _where() -> dict[str, Any]:
+    """This actor's node: its id and the address the node registered with Ray (``ray start
+    --node-ip-address``), which is what the other nodes can reach."""
+    ctx = ray.get_runtime_context()
+    node_id = ctx.get_node_id()
+    ip = next((n["NodeManagerAddress"] for n in ray.nodes() if n.get("NodeID") == node_id), None)
+    with warnings.catch_warnings():  # deprecated in Ray 2.60 without a replacement for this question
+        warnings.simplefilter("ignore")
+        restarted = bool(ctx.was_current_actor_reconstructed)
+    return {"node_id": node_id, "node_ip": ip or ray.util.get_node_ip_address(), "pid": os.getpid(),
+            "restarted": restarted}
+
+
+class _Service:
+    """Shared shape of the router, replay-server and learner actors."""
+
+    component = ""
+
+    def _begin(self, plain: dict) -> RunConfig:
+        cfg = _config(plain)
+        _log_to_run_dir(cfg, self.component)
+        _write_pid(cfg, self.component)
+        self.stop_event = threading.Event()
+        self.where = _where()
+        if self.where["restarted"]:
+            print(f"{self.component}: restarted by Ray (pid {os.getpid()})", flush=True)
+        return cfg
+
+    def info(self) -> dict[str, Any]:
+        return dict(self.where)
+
+    def run(self) -> str:
+        self.stop_event.wait()
+        return "stopped"
+
+
+@ray.remote
+class RouterActor(_Service):
+    component = "router"
+
+    def __init__(self, plain: dict, port: int, host: str):
+        cfg = self._begin(plain)
+        # Listen on the address of the node this actor landed on (never the driver's), or on
+        # deploy.advertise_host. A restart runs this again with the same port: clients reconnect.
+        self.endpoint = f"tcp/{host or self.where['node_ip']}:{port}"
+        self.router = Builder(cfg).router(self.endpoint).start()
+
+    def info(self) -> dict[str, Any]:
+        return {**self.where, "endpoint": self.endpoint}
+
+    def stop(self) -> None:
+        self.router.close()
+        self.stop_event.set()
+
+
+@ray.remote
+class ReplayServerActor(_Service):
+    component = "replay-server"
+
+    def __init__(self, plain: dict):
+        cfg = self._begin(plain)
+        self.cfg = cfg
+        self.server = Builder(cfg).replay_server()
+        self.started = self.server.start()  # restores its checkpoint after a crash
+        self.final: dict | None = None
+
+    def info(self) -> dict[str, Any]:
+        port = self.started.get("http_port")
+        host = self.cfg.replay.http_host
+        shown = self.where["node_ip"] if host in ("0.0.0.0", "::") else host
+        return {**self.where, "http_url": f"http://{shown}:{port}" if port else None,
+                "restored_items": self.started.get("restored", 0)}
+
+    def stats(self) -> dict:
+        return self.server.core.stats()
+
+    def broadcast_stop(self) -> None:
+        """Tell every env worker (and the learner) to end its loop: the run-wide stop message."""
+        from laneshift import wire
+
+        self.server.service.session.put(wire.control_key(self.cfg.transport.run_id), wire.encode_json({"cmd": "stop"}))
+
+    def stop(self) -> dict:
+        if self.final is None:
+            self.final = self.server.stop()
+        self.stop_event.set()
+        return self.final
+
+
+@ray.remote
+class LearnerActor(_Service):
+    component = "learner"
+
+    def __init__(self, plain: dict):
+        import torch
+
+        from laneshift import transport
+
+        cfg = self._begin(plain)
+        torch.set_num_threads(cfg.learner.torch_threads)
+        builder = Builder(cfg)
+        self.session = transport.open_session(cfg.transport)
+        self.learner = builder.learner(builder.learner_links(self.session, self.stop_event), self.stop_event)
+
+    def run(self) -> dict:
+        self.learner.run()  # returns on stop(), a stop message, or the stop criterion
+        return {**self.learner.last_status, "restored_from": self.learner.restored_from,
+                "checkpoint_failures": self.learner.checkpoint_failures, "device": str(self.learner.agent.device)}
+
+    def status(self) -> dict:
+        return {**self.learner.last_status, "checkpoint_failures": self.learner.checkpoint_failures}
+
+    def stop(self) -> None:
+        self.stop_event.set()
+
+
+@ray.remote
+class EnvWorkerActor:
+    """One env worker; its ``run`` returns the worker's summary when its budget is spent."""
+
+    def __init__(self, plain: dict, index: int):
+        from laneshift import transport
+
+        cfg = _config(plain)
+        builder = Builder(cfg)
+        self.cfg, self.name = cfg, builder.workers[index]
+        _log_to_run_dir(cfg, self.name)
+        _write_pid(cfg, self.name)
+        self.where = _where()
+        self.session = transport.open_session(cfg.transport)
+        self.links = builder.actor_links(self.session, self.name)
+        self.worker = builder.env_worker(index)
+
+    def info(self) -> dict[str, Any]:
+        return dict(self.where)
+
+    def run(self, env_steps: int, restarts: int = 0) -> dict:
+        from laneshift.actors.worker import Resume
+
+        state = self._resume_point()
+        resume = Resume(env_steps=min(state["env_steps"], env_steps), next_seq=state["next_seq"], restarts=restarts)
+        summary = self.worker.run(self.links, env_steps, resume).as_dict()
+        return {**summary, "node": self.where["node_id"], "node_ip": self.where["node_ip"], "restarts": restarts,
+                "resumed_at": resume.env_steps}
+
+    def _resume_point(self) -> dict[str, int]:
+        """Ask the replay server what it stored of this worker (a first start gets zeros)."""
+        from laneshift import transport, wire
+
+        key = wire.replay_control_key(self.cfg.transport.run_id)
+        body = wire.encode_json({"cmd": "actor_state", "actor": self.name})
+        deadline = time.monotonic() + self.cfg.deploy.start_timeout_s
+        while time.monotonic() < deadline:
+            reply = transport.query(self.session, key, body, self.cfg.transport.timeout_s)
+            if reply is not None:
+                try:
+                    state = wire.decode_json(reply)
+                except wire.WireError:
+                    state = {}
+                if state.get("ok"):
+                    return {"env_steps": int(state["env_steps"]), "next_seq": int(state["next_seq"])}
+            time.sleep(0.2)
+        raise TimeoutError(f"{self.name}: the replay server did not answer within "
+                           f"{self.cfg.deploy.start_timeout_s:.0f} s (router {self.cfg.transport.router})")

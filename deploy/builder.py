@@ -1,0 +1,139 @@
+"""The one builder: every component of a training run, made from its ``RunConfig``.
+
+What it is: the single place that knows how to construct the replay server, the learner and
+the env workers, and with which Ray options each one is placed. Local mode, cluster mode and
+the in-process test mode all build through it and differ only in *where* each component runs
+(Sample Factory's serial vs parallel runners, Acme's builder used by both of its runners):
+
+    in-process (deploy.inprocess)   threads of one process, in-memory links
+    local / cluster (deploy.launch) one Ray actor each (deploy.actors), zenoh links
+
+May import: the contract (``laneshift.config``, ``wire``, ``envspec``, ``transport``) and the
+components it builds (that is its job); nothing imports it but ``deploy``.
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass, field
+from typing import Any
+
+from laneshift.config import RunConfig, worker_budgets, worker_names
+from laneshift.envspec import EnvSpec, env_spec
+
+#: The run's services, in start order (each one's clients need the ones before it).
+SERVICES = ("router", "replay-server", "learner")
+
+#: The cluster-mode router port when ``deploy.router_port`` is 0 (zenoh's usual port).
+CLUSTER_ROUTER_PORT = 7447
+
+
+@dataclass(frozen=True)
+class Placement:
+    """Where one component runs: its Ray actor options."""
+
+    name: str  # the Ray actor's name: <run id>-<component>
+    num_cpus: float
+    num_gpus: float = 0.0
+    resources: dict[str, float] = field(default_factory=dict)
+    max_restarts: int = 0
+    max_concurrency: int = 1  # > 1: a threaded actor whose stop() runs beside its run()
+
+    def ray_options(self) -> dict[str, Any]:
+        opts: dict[str, Any] = {"name": self.name, "num_cpus": self.num_cpus, "num_gpus": self.num_gpus,
+                                "max_restarts": self.max_restarts, "max_task_retries": 0,
+                                "max_concurrency": self.max_concurrency}
+        if self.resources:
+            opts["resources"] = dict(self.resources)
+        return opts
+
+
+class Builder:
+    """Builds the components of one run. Cheap to make: nothing is built until asked for."""
+
+    def __init__(self, cfg: RunConfig):
+        self.cfg = cfg
+        self._spec: EnvSpec | None = None
+
+    @property
+    def spec(self) -> EnvSpec:
+        """The env's observation and action spec, computed once."""
+        if self._spec is None:
+            self._spec = env_spec(self.cfg.env)
+        return self._spec
+
+    @property
+    def workers(self) -> list[str]:
+        return worker_names(self.cfg.actor.workers)
+
+    @property
+    def budgets(self) -> list[int]:
+        return worker_budgets(self.cfg.train.env_steps, self.cfg.actor.workers)
+
+    # ------------------------------------------------------------------ what each component is
+
+    def router(self, listen: str):
+        from .router import Router
+
+        return Router(listen)
+
+    def replay_core(self):
+        """The replay tables and rules alone (the in-process mode drives it directly)."""
+        from laneshift.replay_server.service import build_core
+
+        return build_core(self.cfg)
+
+    def replay_server(self):
+        """Core + zenoh service + HTTP API, as one server with start()/stop()."""
+        from laneshift.replay_server.service import ReplayServer
+
+        return ReplayServer(self.cfg)
+
+    def learner(self, links, stop: threading.Event):
+        from laneshift.learner.loop import Learner
+
+        return Learner(self.cfg, self.spec, links, stop)
+
+    def learner_links(self, session, stop: threading.Event):
+        from laneshift.learner.links import ZenohLearnerLinks
+
+        return ZenohLearnerLinks(session, self.cfg, self.spec.schema, stop)
+
+    def env_worker(self, index: int):
+        from laneshift.actors.worker import EnvWorker
+
+        cfg = self.cfg
+        return EnvWorker(self.workers[index], index, cfg.env, cfg.actor, cfg.learner.hidden,
+                         sync=cfg.train.parallel == "sync", rehearsal=cfg.replay.pretrains,
+                         n_step=cfg.learner.n_step, gamma=cfg.learner.gamma, dueling=cfg.learner.dueling)
+
+    def actor_links(self, session, name: str):
+        from laneshift.actors.links import ZenohActorLinks
+
+        return ZenohActorLinks(session, self.cfg.transport.run_id, name, self.cfg.transport.timeout_s)
+
+    # ------------------------------------------------------------------ where each component runs
+
+    def placement(self, component: str) -> Placement:
+        """Ray options of ``router``, ``replay-server``, ``learner`` or a worker name (``w3``)."""
+        d, run = self.cfg.deploy, self.cfg.transport.run_id
+        if component == "router":
+            return Placement(f"{run}-router", d.router_cpus, 0.0, d.router_resources, d.max_restarts, 2)
+        if component == "replay-server":
+            return Placement(f"{run}-replay-server", d.replay_cpus, 0.0, d.replay_resources, d.max_restarts, 4)
+        if component == "learner":
+            res = dict(d.learner_resources)
+            gpus = float(res.pop("GPU", 0.0))  # Ray takes GPUs as num_gpus, not as a custom resource
+            return Placement(f"{run}-learner", d.learner_cpus, gpus, res, d.max_restarts, 4)
+        if component in self.workers:
+            return Placement(f"{run}-{component}", d.worker_cpus, 0.0, d.worker_resources, d.max_restarts, 1)
+        raise ValueError(f"unknown component {component!r}")
+
+    def router_port(self, local: bool) -> int:
+        if self.cfg.deploy.router_port:
+            return self.cfg.deploy.router_port
+        if local:
+            from laneshift.transport import free_tcp_port
+
+            return free_tcp_port()
+        return CLUSTER_ROUTER_PORT

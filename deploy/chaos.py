@@ -1,0 +1,227 @@
+"""``laneshift chaos``: the fault suite. Each fault against a real 2-worker local run.
+
+What it is: one training run per fault, each with the fault injected at a fixed point of the
+run, and one table row per fault: survived, recovery seconds, transitions made / stored /
+counted lost, weights versions monotonic, demo shard bytes identical, processes left behind.
+``tests/test_faults.py`` runs the same faults (with ``FaultInjector``) as fast tests.
+May import: the contract and ``deploy``.
+
+    laneshift chaos --faults worker,learner,router,replay,replay-after-checkpoint,disk-full --json
+
+Processes are found through ``<run dir>/logs/<component>.pid`` (each actor writes its own).
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import io
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+from laneshift.config import load_run_config
+
+#: A small, fast run with every mechanism on (LKA plant: seconds per thousand steps).
+FAST = {"env.scenario": "lka", "actor.workers": 2, "actor.send_every": 50, "actor.epsilon_decay_steps": 1000,
+        "learner.hidden": "64,64", "learner.batch_size": 64, "learner.publish_every": 10,
+        "learner.checkpoint_every": 100, "learner.checkpoint_every_s": 1.0, "replay.samples_per_insert": 8,
+        "replay.spi_tolerance": 1024, "replay.min_size": 200, "train.eval_episodes": 0, "train.log_every_s": 0.5}
+
+
+def logged_env_steps(run_dir: Path) -> tuple[int, int]:
+    """The newest (env steps, updates) the learner logged in ``metrics.jsonl`` ((0, 0) before any)."""
+    try:
+        lines = (run_dir / "metrics.jsonl").read_text().splitlines()
+    except OSError:
+        return 0, 0
+    for line in reversed(lines):
+        try:
+            rec = json.loads(line)
+        except json.JSONDecodeError:
+            continue
+        if rec.get("kind") == "learner" and "env_steps" in rec:
+            return int(rec["env_steps"]), int(rec.get("updates", 0))
+    return 0, 0
+
+
+@dataclass
+class FaultInjector(threading.Thread):
+    """Sends ``sig`` to ``component``'s process once the run has made ``at_steps`` env steps and
+    ``ready()`` holds; then measures recovery: seconds until env steps (and updates) move again."""
+
+    run_dir: Path
+    component: str
+    at_steps: int
+    ready: Callable[[], bool] = lambda: True
+    sig: int = signal.SIGKILL
+    timeout_s: float = 300.0
+    killed_pid: int | None = None
+    killed_at: float | None = None
+    recovery_s: float | None = None
+    _stop: threading.Event = field(default_factory=threading.Event)
+
+    def __post_init__(self) -> None:
+        threading.Thread.__init__(self, daemon=True, name=f"inject-{self.component}")
+
+    def run(self) -> None:
+        deadline = time.monotonic() + self.timeout_s
+        pid_file = self.run_dir / "logs" / f"{self.component}.pid"
+        while time.monotonic() < deadline and not self._stop.is_set():
+            if pid_file.exists() and logged_env_steps(self.run_dir)[0] >= self.at_steps and self.ready():
+                before = logged_env_steps(self.run_dir)
+                pid = int(pid_file.read_text())
+                os.kill(pid, self.sig)
+                self.killed_pid, self.killed_at = pid, time.monotonic()
+                self._measure_recovery(before, deadline)
+                return
+            time.sleep(0.05)
+
+    def _measure_recovery(self, before: tuple[int, int], deadline: float) -> None:
+        # Progress after the fault: both counters past where they stood when it struck, so a
+        # learner that died shows recovery only once it updates again (actors may go on meanwhile).
+        while time.monotonic() < deadline and not self._stop.is_set():
+            steps, updates = logged_env_steps(self.run_dir)
+            if steps > before[0] and updates > before[1]:
+                self.recovery_s = round(time.monotonic() - self.killed_at, 1)
+                return
+            time.sleep(0.1)
+
+    def stop(self) -> None:
+        self._stop.set()
+
+
+def _digest(paths: list[str]) -> str:
+    h = hashlib.sha256()
+    for root in sorted(paths):
+        for p in sorted(Path(root).rglob("*")):
+            if p.is_file():
+                h.update(p.read_bytes())
+    return h.hexdigest()
+
+
+def _ray_processes(run_dir: Path) -> list[int]:
+    """Processes still holding a file of this run open (actors log into the run dir)."""
+    left = []
+    for q in os.listdir("/proc"):
+        if not q.isdigit() or int(q) == os.getpid():
+            continue
+        try:
+            fds = [os.readlink(f"/proc/{q}/fd/{f}") for f in os.listdir(f"/proc/{q}/fd")]
+        except OSError:
+            continue
+        if any(f.startswith(str(run_dir) + "/") for f in fds):
+            left.append(int(q))
+    return left
+
+
+FAULTS: dict[str, dict] = {
+    "worker": {"component": "w1"},
+    "learner": {"component": "learner", "needs": "learner_state"},
+    "router": {"component": "router"},
+    "replay": {"component": "replay-server", "overrides": {"replay.checkpoint_every_s": 0}},
+    "replay-after-checkpoint": {"component": "replay-server", "needs": "replay_checkpoint",
+                                "overrides": {"replay.checkpoint_every_s": 0.5}},
+}
+
+
+def run_fault(name: str, work: Path, env_steps: int, demos: str | None) -> dict:
+    spec = FAULTS[name]
+    run_dir = work / name / "run"
+    overrides = {**FAST, "train.run_dir": str(run_dir), "train.env_steps": env_steps, **spec.get("overrides", {})}
+    if demos:
+        overrides.update({"replay.demo_mode": "retention", "replay.demo_paths": demos, "replay.capacity": 20_000})
+    cfg = load_run_config(overrides=overrides)
+    since: list[float] = []
+
+    def ready() -> bool:
+        since.append(since[0] if since else time.time())
+        need = spec.get("needs")
+        if need == "learner_state":
+            p = run_dir / "checkpoints" / "learner_state.pt"
+            return p.exists() and p.stat().st_mtime > since[0]
+        if need == "replay_checkpoint":
+            return (run_dir / "replay_checkpoint" / "meta.json").exists()
+        return True
+
+    demo_before = _digest([demos]) if demos else ""
+    inject = FaultInjector(run_dir, spec["component"], at_steps=env_steps // 4, ready=ready)
+    inject.start()
+    from .local import train_local
+
+    out = io.StringIO()
+    started = time.monotonic()
+    rc = train_local(cfg, out=out)
+    inject.stop()
+    row: dict = {"fault": name, "rc": rc, "wall_s": round(time.monotonic() - started, 1),
+                 "injected": inject.killed_pid is not None, "recovery_s": inject.recovery_s}
+    try:
+        summary = json.loads((run_dir / "summary.json").read_text())
+        replay = json.loads((run_dir / "replay_stats.json").read_text())
+    except (OSError, json.JSONDecodeError):
+        return {**row, "survived": False, "log_tail": out.getvalue()[-2000:]}
+    made = sum(w["env_steps"] for w in summary["workers"])
+    stored = int(replay["tables"]["online"]["inserted"])
+    lost = int(summary["replay"]["lost_items"])
+    monotonic = all([v for v, _ in w["version_runs"]] == sorted(v for v, _ in w["version_runs"])
+                    for w in summary["workers"])
+    time.sleep(2)  # let Ray's processes exit before counting what is left
+    row.update({"survived": rc == 0 and made == env_steps, "restarts": summary.get("restarts", {}),
+                "made": made, "stored": stored, "lost_counted": lost, "unaccounted": made - stored - lost,
+                "versions_monotonic": monotonic,
+                "demo_identical": (_digest([demos]) == demo_before) if demos else None,
+                "left_behind": len(_ray_processes(run_dir))})
+    return row
+
+
+def render(rows: list[dict]) -> str:
+    head = f"{'fault':<26}{'survived':>9}{'recovery s':>11}{'made':>8}{'stored':>8}{'lost':>6}{'unacc.':>7}" \
+           f"{'monotonic':>10}{'demo same':>10}{'left':>5}"
+    lines = [head]
+    for r in rows:
+        lines.append(f"{r['fault']:<26}{str(r.get('survived')):>9}{str(r.get('recovery_s')):>11}"
+                     f"{r.get('made', '-'):>8}{r.get('stored', '-'):>8}{r.get('lost_counted', '-'):>6}"
+                     f"{r.get('unaccounted', '-'):>7}{str(r.get('versions_monotonic')):>10}"
+                     f"{str(r.get('demo_identical')):>10}{r.get('left_behind', '-'):>5}")
+    return "\n".join(lines)
+
+
+def chaos_main(args: argparse.Namespace) -> int:
+    names = [n.strip() for n in args.faults.split(",") if n.strip()]
+    unknown = [n for n in names if n not in FAULTS]
+    if unknown:
+        print(f"laneshift chaos: unknown fault {unknown[0]!r} (known: {', '.join(FAULTS)})", file=sys.stderr)
+        return 2
+    work = Path(args.work_dir).resolve()
+    demos = None
+    if args.demos:
+        from laneshift.demos.generate import generate_shard
+
+        demos = str(generate_shard(work / "demos", env_id_or_scenario="lka", env_kwargs={}, episodes=6, seed=0))
+    rows = []
+    for name in names:
+        print(f"chaos: {name} ...", file=sys.stderr, flush=True)
+        rows.append(run_fault(name, work, args.env_steps, demos))
+        print(f"chaos: {name}: {'survived' if rows[-1].get('survived') else 'FAILED'}, "
+              f"recovery {rows[-1].get('recovery_s')} s", file=sys.stderr, flush=True)
+    rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
+    print(json.dumps({"revision": rev, "env_steps": args.env_steps, "rows": rows}, indent=2) if args.json
+          else render(rows))
+    return 0 if all(r.get("survived") for r in rows) else 1
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("chaos", help="the fault suite: each fault against a real 2-worker local run, one row each")
+    p.add_argument("--faults", default=",".join(FAULTS), help=f"comma-separated (default: all of {', '.join(FAULTS)})")
+    p.add_argument("--env-steps", type=int, default=8000, help="budget of each run (default 8000)")
+    p.add_argument("--work-dir", default="runs/chaos", help="where the runs go (default runs/chaos)")
+    p.add_argument("--demos", action="store_true", help="retention with a demo shard, to check its bytes stay identical")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=chaos_main)

@@ -1,0 +1,699 @@
+"""``laneshift train``: one launcher for local and cluster mode; read it as the diagram.
+
+    router        (RouterActor, zenoh, on a node offering deploy.router_resources)
+      ^ replay    (ReplayServerActor: tables, demo shard, checkpoints, HTTP API on its node)
+      ^ learner   (LearnerActor: Double DQN on learner.device, weights out, full-state checkpoints)
+      ^ w0..wN-1  (EnvWorkerActor: envs, epsilon-greedy, transitions every K steps)
+    this process  Ray driver only: places the actors, supervises them, shows progress, summarises
+
+Every component is a Ray actor built by ``deploy.builder.Builder``, placed with its resources
+and restarted by Ray up to ``deploy.max_restarts`` times; this launcher notices a death (the
+actor's ``run()`` call fails), says so, and calls ``run()`` again on the restarted actor, which
+resumes from its checkpoint (replay table, learner state) or from what the replay server stored
+of it (an env worker's steps and sequence numbers). Local mode is a private Ray cluster (state
+in a temp dir, no token, loopback only); cluster mode joins a running cluster (``--cluster``,
+``RAY_ADDRESS``, ``ray job submit``). SIGTERM and SIGINT end the run gracefully at any moment:
+final learner and replay checkpoints, summary, nothing left running.
+
+May import: the contract, ``deploy``'s own modules, Ray; components only through the builder.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import fcntl
+import json
+import math
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any, TextIO
+
+from laneshift.config import RunConfig, save_run_config
+
+from .builder import SERVICES, Builder
+
+
+class LaunchError(RuntimeError):
+    """A run could not start or go on; the message is the one line the user sees."""
+
+
+# ---------------------------------------------------------------------------- signals
+
+
+class StopSignals:
+    """SIGTERM and SIGINT set a flag the launcher polls, from before Ray starts to the end.
+
+    Ray's driver installs its own SIGTERM handler (it aborts the process ~3 s later, cutting any
+    cleanup short), so ``install()`` runs again once Ray is connected.
+    """
+
+    def __init__(self) -> None:
+        self.received: int | None = None
+
+    def install(self) -> "StopSignals":
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, self._on_signal)
+        return self
+
+    def _on_signal(self, signum: int, _frame: Any) -> None:
+        if self.received is not None and signum == signal.SIGINT:
+            raise KeyboardInterrupt  # a second Ctrl-C: stop waiting for the graceful end
+        self.received = signum
+
+    @property
+    def name(self) -> str:
+        return signal.Signals(self.received).name if self.received else ""
+
+    @staticmethod
+    def restore() -> None:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, signal.SIG_DFL if sig == signal.SIGTERM else signal.default_int_handler)
+
+
+# ---------------------------------------------------------------------------- the run dir
+
+
+class RunDirLock:
+    """One launcher per run dir (``<run dir>/.lock``, released when the process ends, even by kill -9)."""
+
+    def __init__(self, run_dir: Path):
+        self.path = run_dir / ".lock"
+        self._fd: int | None = None
+
+    def acquire(self) -> "RunDirLock":
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
+            os.close(fd)
+            raise LaunchError(f"run dir {self.path.parent} is in use by another `laneshift train` (pid {holder})") from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, str(os.getpid()).encode(), 0)
+        self._fd = fd
+        return self
+
+    def release(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+
+
+#: What a run leaves in its run dir that a new run must not silently reuse.
+RUN_STATE = ("config.yaml", "replay_checkpoint", "checkpoints", "summary.json", "replay_stats.json",
+             "metrics.jsonl", "tb", "logs")
+
+
+def prepare_run_dir(run_dir: Path, resume: bool, overwrite: bool, out: TextIO) -> None:
+    used = (run_dir / "config.yaml").exists()
+    if used and not (resume or overwrite):
+        raise LaunchError(f"run dir {run_dir} already holds a run: `--resume {run_dir}` continues it, "
+                          f"--overwrite starts it over, or choose another --run-dir")
+    if resume and not used:
+        raise LaunchError(f"--resume {run_dir}: no run there (no config.yaml)")
+    if overwrite and used:
+        print(f"train: --overwrite: removing the previous run's state in {run_dir}", file=out, flush=True)
+        for name in RUN_STATE:
+            path = run_dir / name
+            shutil.rmtree(path, ignore_errors=True) if path.is_dir() else path.unlink(missing_ok=True)
+
+
+# ---------------------------------------------------------------------------- demo shard
+
+
+def _default_demo_episodes(cfg: RunConfig) -> int:
+    """Scripted episodes for the default shard: ``train.demo_episodes``, else enough for
+    retention's demo region (or 2,000 transitions for rehearsal), at least 20."""
+    from laneshift.envspec import make_env
+
+    if cfg.train.demo_episodes:
+        return cfg.train.demo_episodes
+    need = cfg.replay.capacity * cfg.replay.demo_ratio if cfg.replay.retains_demos else 2_000
+    probe = make_env(cfg.env)
+    horizon = getattr(probe.unwrapped, "max_steps", None) or 100
+    probe.close()
+    return max(20, math.ceil(1.3 * need / horizon))
+
+
+def default_demo_dir(cfg: RunConfig, episodes: int) -> Path:
+    """Where the default scripted shard lives (shared by runs; its size and the driver's version
+    are in the name, so a run that needs more demos, or a newer driver's, gets a new shard instead
+    of a refusal or stale demos)."""
+    from laneshift.actors.envs.demonstrator import ScriptedDriver
+    from laneshift.envspec import env_spec
+
+    env = cfg.env
+    # The observation's shape is in the name: a layout change makes a new shard, not a refusal.
+    shape = "x".join(str(d) for d in env_spec(env).schema.obs_shape)
+    name = f"{env.scenario.replace('/', '_')}-{env.observation}{shape}-p{env.reward_preset}-scripted-v{ScriptedDriver.VERSION}-{episodes}ep"
+    return Path(cfg.train.run_dir).resolve().parent / "demos" / name
+
+
+def ensure_demo_shard(cfg: RunConfig, out: TextIO) -> RunConfig:
+    """Demo modes without a shard get the scripted demonstrator's, generated once if absent."""
+    if cfg.replay.demo_mode == "none" or cfg.replay.demo_paths:
+        return cfg
+    episodes = _default_demo_episodes(cfg)
+    path = default_demo_dir(cfg, episodes)
+    if not any(path.glob("**/metadata.json")):
+        from laneshift.demos.generate import generate_shard
+
+        print(f"train: generating the default demo shard ({episodes} scripted episodes) in {path}", file=out, flush=True)
+        generate_shard(path, env_id_or_scenario=cfg.env.scenario, env_kwargs=cfg.env.env_kwargs(),
+                       episodes=episodes, seed=cfg.train.seed + 10_000)
+    return cfg.replace(replay=dataclasses.replace(cfg.replay, demo_paths=(str(path),)))
+
+
+# ---------------------------------------------------------------------------- Ray
+
+
+class RayConnection:
+    """A private local Ray cluster, or a running one joined as a driver. Contacted (and its
+    token checked) before any component starts."""
+
+    def __init__(self, address: str | None):
+        self.address = address
+        self.temp_dir: str | None = None
+        self._reaper: subprocess.Popen | None = None
+
+    def open(self, cfg: RunConfig) -> "RayConnection":
+        if self.address is not None and (os.environ.get("RAY_AUTH_TOKEN") or os.environ.get("RAY_AUTH_TOKEN_PATH")):
+            # A token was given: use it (Ray sends one to an explicit address only in token mode).
+            # Set before Ray reads its auth settings.
+            os.environ.setdefault("RAY_AUTH_MODE", "token")
+        import ray
+
+        if self.address is None:
+            os.environ.pop("RAY_ADDRESS", None)  # --local inside a job: a private cluster all the same
+            os.environ["RAY_AUTH_MODE"] = "disabled"  # loopback-only cluster; keeps ~/.ray untouched
+            os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+            self.temp_dir = tempfile.mkdtemp(prefix="lsray-")  # short: unix socket paths < 108 chars
+            self._reaper = _temp_dir_reaper(self.temp_dir)
+            d = cfg.deploy
+            cpus = d.router_cpus + d.replay_cpus + d.learner_cpus + cfg.actor.workers * d.worker_cpus
+            resources: dict[str, float] = {}
+            for res in (d.router_resources, d.replay_resources, d.learner_resources):
+                for k, v in res.items():
+                    resources[k] = resources.get(k, 0.0) + v
+            for k, v in d.worker_resources.items():
+                resources[k] = resources.get(k, 0.0) + v * cfg.actor.workers
+            resources.pop("GPU", None)
+            ray.init(num_cpus=max(math.ceil(cpus), 1), resources=resources or None, include_dashboard=False,
+                     _temp_dir=self.temp_dir, _node_ip_address="127.0.0.1", log_to_driver=False,
+                     configure_logging=False)
+            return self
+        if not self.address.startswith("ray://"):
+            _probe_gcs(self.address)
+        try:
+            ray.init(address=self.address, log_to_driver=False, configure_logging=False)
+        except Exception as exc:  # noqa: BLE001 - Ray raises many kinds; the user needs one line
+            raise LaunchError(_ray_connect_error(self.address, exc)) from None
+        return self
+
+    def close(self) -> None:
+        import ray
+
+        if ray.is_initialized():
+            ray.shutdown()
+        if self.temp_dir is not None:
+            shutil.rmtree(self.temp_dir, ignore_errors=True)
+        if self._reaper is not None:
+            self._reaper.terminate()
+            try:
+                self._reaper.wait(5)
+            except subprocess.TimeoutExpired:
+                self._reaper.kill()
+
+
+def _probe_gcs(address: str) -> None:
+    """Reach the cluster's GCS and check this driver's token in about a second, before anything
+    starts (``ray.init`` would print 20 s of InvalidAuthToken warnings, then a long traceback)."""
+    from ray._private.services import canonicalize_bootstrap_address
+    from ray._raylet import GcsClient
+
+    try:
+        gcs = canonicalize_bootstrap_address(address)
+    except Exception as exc:  # noqa: BLE001 - e.g. "auto" with no cluster on this node
+        raise LaunchError(_ray_connect_error(address, exc)) from None
+    if gcs is None:
+        raise LaunchError(f"no running Ray cluster found for --cluster {address} (start one with `ray start --head`, "
+                          f"or name it as HOST:PORT)")
+    try:
+        client = GcsClient(address=gcs)
+        client.internal_kv_get(b"laneshift-probe", namespace=None, timeout=10)
+    except Exception as exc:  # noqa: BLE001
+        raise LaunchError(_ray_connect_error(gcs, exc)) from None
+
+
+def _ray_connect_error(address: str, exc: Exception) -> str:
+    text = f"{type(exc).__name__}: {exc}"
+    if any(s in text for s in ("InvalidAuthToken", "Unauthenticated", "UNAUTHENTICATED", "AuthenticationError")):
+        given = "a wrong token" if os.environ.get("RAY_AUTH_MODE") == "token" else "no token"
+        return (f"Ray at {address} requires its authentication token and this driver sent {given}: set "
+                f"RAY_AUTH_TOKEN (or RAY_AUTH_TOKEN_PATH) to the cluster's token (`ray get-auth-token` on the "
+                f"head prints it; docs/deploy.md), then retry")
+    last = text.strip().splitlines()[-1] if text.strip() else type(exc).__name__
+    return f"cannot connect to Ray at {address}: {last[:300]}"
+
+
+def _temp_dir_reaper(path: str) -> subprocess.Popen:
+    """A tiny watcher that removes the private Ray temp dir if this launcher is killed with -9
+    (Ray's own processes die with it: they are started with the parent-death signal)."""
+    # Ray's dashboard and runtime-env agents do not die with the launcher: the watcher ends every
+    # process that holds a file open under this run's private temp dir (only Ray's, started by us;
+    # their command lines are rewritten to "ray::DashboardAgent", so they are found by their logs).
+    code = ("import os,shutil,signal,sys,time\n"
+            "p,d=int(sys.argv[1]),sys.argv[2]\n"
+            "while os.getppid()==p: time.sleep(0.5)\n"
+            "time.sleep(2)\n"
+            "for _ in range(20):\n"
+            "    left=[]\n"
+            "    for q in os.listdir('/proc'):\n"
+            "        if not q.isdigit() or int(q)==os.getpid(): continue\n"
+            "        try: fds=[os.readlink(f'/proc/{q}/fd/{f}') for f in os.listdir(f'/proc/{q}/fd')]\n"
+            "        except OSError: continue\n"
+            "        if any(f.startswith(d+'/') for f in fds): left.append(int(q))\n"
+            "    if not left: break\n"
+            "    for q in left:\n"
+            "        try: os.kill(q,signal.SIGKILL)\n"
+            "        except OSError: pass\n"
+            "    time.sleep(0.5)\n"
+            "shutil.rmtree(d,ignore_errors=True)\n")
+    return subprocess.Popen([sys.executable, "-c", code, str(os.getpid()), path], stdin=subprocess.DEVNULL,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+
+
+# ---------------------------------------------------------------------------- progress
+
+
+class Progress:
+    """One live status line from the learner's status."""
+
+    def __init__(self, out: TextIO, budget: int):
+        self.out, self.budget = out, budget
+        self.tty = hasattr(out, "isatty") and out.isatty()
+        self.last: dict = {}
+        self.started = time.monotonic()
+
+    def line(self) -> str:
+        s = self.last
+        if not s:
+            return f"[{time.monotonic() - self.started:6.1f}s] starting ..."
+        elapsed = max(time.monotonic() - self.started, 1e-6)
+        fmt = lambda v, f: format(v, f) if isinstance(v, (int, float)) else "-"  # noqa: E731
+        lag = s.get("version_lag") or {}
+        return (f"[{elapsed:6.1f}s] steps {s.get('env_steps', 0):>7,}/{self.budget:,} ({s.get('env_steps', 0) / elapsed:5.0f}/s)"
+                f" | ep {s.get('episodes', 0):>5} return {fmt(s.get('return_mean'), '7.2f')}"
+                f" crash {fmt(s.get('crash_rate'), '.2f')}"
+                f" | upd {s.get('updates', 0):>6,} ({fmt(s.get('updates_per_s'), '.0f')}/s)"
+                f" loss {fmt(s.get('loss'), '.4f')} q {fmt(s.get('q_mean'), '.2f')}"
+                f" | replay {fmt(s.get('replay_size'), ',')} | v{s.get('version', 0)} phase {s.get('phase', 0)}"
+                f" lag {'/'.join(str(lag[k]) for k in sorted(lag)[:8]) or '-'}")
+
+    def show(self) -> None:
+        self.out.write(("\r\033[K" if self.tty else "") + self.line() + ("" if self.tty else "\n"))
+        self.out.flush()
+
+    def say(self, text: str) -> None:
+        """A message on its own line (not overwritten by the next progress line)."""
+        self.out.write(("\n" if self.tty else "") + text + "\n")
+        self.out.flush()
+
+
+# ---------------------------------------------------------------------------- the run
+
+
+class Run:
+    """The run's actors and their supervision (the launcher's state, one per ``train``)."""
+
+    def __init__(self, cfg: RunConfig, local: bool, out: TextIO, signals: StopSignals):
+        self.cfg, self.local, self.out, self.signals = cfg, local, out, signals
+        self.builder = Builder(cfg)
+        self.handles: dict[str, Any] = {}
+        self.refs: dict[str, Any] = {}  # component -> its pending run() call
+        self.deaths: dict[str, int] = {}
+        self.where: dict[str, dict] = {}
+        self.summaries: dict[str, dict] = {}
+        self.progress = Progress(out, cfg.train.env_steps)
+        self.replay_final: dict | None = None
+        self.learner_final: dict | None = None
+
+    # -- start
+
+    def _start(self, component: str, cls: Any, *args: Any) -> Any:
+        import ray
+
+        placement = self.builder.placement(component)
+        handle = cls.options(**placement.ray_options()).remote(*args)
+        self.handles[component] = handle
+        try:
+            self.where[component] = ray.get(handle.info.remote(), timeout=self.cfg.deploy.start_timeout_s)
+        except ray.exceptions.GetTimeoutError:
+            raise LaunchError(_not_started(component, placement, self.cfg.deploy.start_timeout_s)) from None
+        except ray.exceptions.RayActorError as exc:
+            raise LaunchError(f"{component} failed to start: {_cause(exc)}") from None
+        return handle
+
+    def start(self) -> None:
+        import ray
+
+        from .actors import EnvWorkerActor, LearnerActor, ReplayServerActor, RouterActor
+
+        cfg = self.cfg
+        host = cfg.deploy.advertise_host or ("127.0.0.1" if self.local else "")
+        port = self.builder.router_port(self.local)
+        self._start("router", RouterActor, cfg.to_dict(), port, host)
+        endpoint = self.where["router"]["endpoint"]
+        # From here on every component is a client of the router where it landed.
+        cfg = self.cfg = cfg.replace(transport=dataclasses.replace(cfg.transport, router=endpoint))
+        self.builder = Builder(cfg)
+        save_run_config(cfg, Path(cfg.train.run_dir) / "config.yaml")
+        plain = cfg.to_dict()
+        self._start("replay-server", ReplayServerActor, plain)
+        self._start("learner", LearnerActor, plain)
+        worker_plain = plain
+        if cfg.deploy.worker_router:  # workers reach the router through a relay or proxy
+            worker_plain = cfg.replace(transport=dataclasses.replace(cfg.transport, router=cfg.deploy.worker_router)).to_dict()
+        for i, name in enumerate(self.builder.workers):
+            self.handles[name] = EnvWorkerActor.options(**self.builder.placement(name).ray_options()).remote(worker_plain, i)
+        workers = self.builder.workers
+        try:
+            found = ray.get([self.handles[n].info.remote() for n in workers], timeout=self.cfg.deploy.start_timeout_s)
+        except ray.exceptions.GetTimeoutError:
+            raise LaunchError(_not_started("env workers", self.builder.placement(workers[0]),
+                                           self.cfg.deploy.start_timeout_s)) from None
+        except ray.exceptions.RayActorError as exc:
+            raise LaunchError(f"an env worker failed to start: {_cause(exc)}") from None
+        self.where.update(zip(workers, found))
+        for name in SERVICES:
+            self.refs[name] = self.handles[name].run.remote()
+        for name, share in zip(self.builder.workers, self.builder.budgets):
+            self.refs[name] = self.handles[name].run.remote(share, 0)
+        self._say(f"train: run dir {cfg.train.run_dir}; {cfg.actor.workers} workers on {cfg.env.scenario} "
+                  f"({cfg.env.observation}), demo mode {cfg.replay.demo_mode}, {cfg.train.parallel}, "
+                  f"budget {cfg.train.env_steps:,} env steps; zenoh router {endpoint}")
+        http = self.where["replay-server"].get("http_url")
+        if http:
+            self._say(f"train: replay inspection API {http}/stats on node {self.where['replay-server']['node_ip']} "
+                      f"(or: laneshift replay inspect --router {endpoint} --run-id {cfg.transport.run_id})")
+        learner = self.where["learner"]
+        self._say(f"train: router on {self.where['router']['node_ip']}, replay server on "
+                  f"{self.where['replay-server']['node_ip']}, learner on {learner['node_ip']}")
+
+    # -- supervise
+
+    def supervise(self) -> str:
+        """Until every worker is done; returns why it ended: ``done``, ``stopped`` or a signal name."""
+        import ray
+
+        d = self.cfg.deploy
+        last_move, last_mark = time.monotonic(), None
+        while True:
+            if self.signals.received:
+                return self.signals.name
+            workers_left = [n for n in self.builder.workers if n not in self.summaries]
+            if not workers_left:
+                return "done"
+            ready, _ = ray.wait(list(self.refs.values()), num_returns=1, timeout=self.cfg.train.log_every_s)
+            for ref in ready:
+                name = next(n for n, r in self.refs.items() if r == ref)
+                self._collect(name, ref)
+            if "learner" in self.refs and self.learner_final is not None:
+                # The learner ended the run itself (train.stop_return): workers stop via the stop message.
+                pass
+            status = self._learner_status()
+            if status:
+                self.progress.last = status
+            mark = (self.progress.last.get("env_steps"), self.progress.last.get("updates"), len(self.summaries))
+            if mark != last_mark:
+                last_mark, last_move = mark, time.monotonic()
+            elif time.monotonic() - last_move > d.stall_timeout_s:
+                raise LaunchError(f"no progress for {d.stall_timeout_s:.0f} s (no transition stored, no update): "
+                                  f"check {Path(self.cfg.train.run_dir) / 'logs'} and that every node reaches the "
+                                  f"router {self.cfg.transport.router} (deploy.advertise_host)")
+            self.progress.show()
+
+    def _collect(self, name: str, ref: Any) -> None:
+        import ray
+
+        try:
+            result = ray.get(ref)
+        except ray.exceptions.RayActorError as exc:
+            self._restart(name, exc)
+            return
+        except ray.exceptions.RayTaskError as exc:
+            raise LaunchError(f"{name} failed: {_cause(exc)}; its log: "
+                              f"{Path(self.cfg.train.run_dir) / 'logs' / (name + '.log')}") from None
+        del self.refs[name]
+        if name in self.builder.workers:
+            self.summaries[name] = result
+        elif name == "learner":
+            self.learner_final = result
+        else:
+            raise LaunchError(f"{name} stopped unexpectedly")
+
+    def _restart(self, name: str, exc: Exception) -> None:
+        """The actor's run() failed: wait until Ray has it back, count a death if its process is
+        new (a passing fault, ``ActorUnavailableError`` with the same process, is not one), and
+        call run() again: the new process resumes from its checkpoint or the replay server."""
+        import ray
+
+        limit, wait_s = self.cfg.deploy.max_restarts, self.cfg.deploy.start_timeout_s
+        deadline = time.monotonic() + wait_s
+        while True:
+            try:
+                where = ray.get(self.handles[name].info.remote(), timeout=max(0.1, deadline - time.monotonic()))
+                break
+            except ray.exceptions.ActorUnavailableError:  # still restarting
+                if time.monotonic() > deadline:
+                    raise LaunchError(f"{name} died and did not come back within {wait_s:.0f} s") from None
+                time.sleep(0.2)
+            except ray.exceptions.GetTimeoutError:
+                raise LaunchError(f"{name} died and did not come back within {wait_s:.0f} s ({_cause(exc)})") from None
+            except ray.exceptions.RayActorError as again:
+                raise LaunchError(f"{name} died and Ray will not restart it (deploy.max_restarts={limit}): "
+                                  f"{_cause(again)}") from None
+        if where.get("pid") != self.where.get(name, {}).get("pid"):
+            deaths = self.deaths[name] = self.deaths.get(name, 0) + 1
+            self._say(f"train: {name} died ({type(exc).__name__}); Ray restarted it as pid {where.get('pid')} "
+                      f"({deaths}/{limit})")
+        self.where[name] = where
+        self.refs[name] = self._call_run(name)
+
+    def _call_run(self, name: str) -> Any:
+        handle = self.handles[name]
+        if name in self.builder.workers:
+            share = self.builder.budgets[self.builder.workers.index(name)]
+            return handle.run.remote(share, self.deaths.get(name, 0))
+        return handle.run.remote()
+
+    def _learner_status(self) -> dict | None:
+        import ray
+
+        ref = self.handles["learner"].status.remote()
+        ready, _ = ray.wait([ref], timeout=2.0)
+        if not ready:
+            return None
+        try:
+            return ray.get(ready[0])
+        except ray.exceptions.RayError:
+            return None
+
+    # -- stop
+
+    def stop(self, graceful_s: float = 120.0) -> None:
+        """Workers, then learner (final checkpoint), then replay server (final checkpoint), then router."""
+        import ray
+
+        def wait(refs: list, timeout: float) -> None:
+            if refs:
+                ray.wait(refs, num_returns=len(refs), timeout=timeout)
+
+        pending_workers = [n for n in self.builder.workers if n in self.refs]
+        if pending_workers and "replay-server" in self.handles:
+            try:
+                ray.get(self.handles["replay-server"].broadcast_stop.remote(), timeout=10)
+            except ray.exceptions.RayError:
+                pass
+            wait([self.refs[n] for n in pending_workers], 30)
+            for n in pending_workers:
+                try:
+                    self.summaries[n] = ray.get(self.refs[n], timeout=0)
+                except ray.exceptions.RayError:
+                    pass
+        if "learner" in self.handles:
+            try:
+                ray.get(self.handles["learner"].stop.remote(), timeout=10)
+                if "learner" in self.refs:
+                    self.learner_final = ray.get(self.refs["learner"], timeout=graceful_s)
+            except ray.exceptions.RayError as exc:
+                self._say(f"train: learner did not stop cleanly: {_cause(exc)}")
+        if "replay-server" in self.handles:
+            try:
+                self.replay_final = ray.get(self.handles["replay-server"].stop.remote(), timeout=graceful_s)
+            except ray.exceptions.RayError as exc:
+                self._say(f"train: replay server did not stop cleanly: {_cause(exc)}")
+        if "router" in self.handles:
+            try:
+                ray.get(self.handles["router"].stop.remote(), timeout=10)
+            except ray.exceptions.RayError:
+                pass
+
+    def kill_all(self) -> None:
+        import ray
+
+        for handle in self.handles.values():
+            try:
+                ray.kill(handle, no_restart=True)
+            except Exception:  # noqa: BLE001 - already gone
+                pass
+
+    def _say(self, text: str) -> None:
+        self.progress.say(text)
+
+
+def _cause(exc: BaseException) -> str:
+    text = str(exc).strip()
+    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+    for ln in reversed(lines):  # the exception line at the end of a remote traceback
+        if not ln.startswith(("File ", "^", "~")):
+            return ln[:300]
+    return type(exc).__name__
+
+
+def _not_started(component: str, placement: Any, timeout: float) -> str:
+    import ray
+
+    try:
+        free = {k: v for k, v in ray.available_resources().items() if not k.startswith("node:")}
+    except Exception:  # noqa: BLE001
+        free = {}
+    need = {"CPU": placement.num_cpus, **({"GPU": placement.num_gpus} if placement.num_gpus else {}),
+            **placement.resources}
+    return (f"{component} did not start within {timeout:.0f} s: it needs {need} on one node; the cluster has "
+            f"{ {k: round(v, 2) for k, v in sorted(free.items())} } free (deploy.{component.split('-')[0]}_resources)")
+
+
+# ---------------------------------------------------------------------------- summary
+
+
+def _summary(run: Run, why: str, wall: float, out: TextIO) -> dict:
+    cfg, run_dir = run.cfg, Path(run.cfg.train.run_dir)
+    summaries = [run.summaries[n] for n in run.builder.workers if n in run.summaries]
+    last = {**run.progress.last, **(run.learner_final or {})}
+    replay = run.replay_final or {}
+    actors = replay.get("actors", {})
+    steps = sum(s["env_steps"] for s in summaries)
+    episodes = sum(s["episodes"] for s in summaries)
+    lost_batches = sum(int(a.get("lost_batches", 0)) for a in actors.values())
+    lost_items = sum(int(a.get("lost_items", 0)) for a in actors.values())
+    # Batches a worker sent after the last one the server saw (it ended while the server was
+    # down): no later batch shows their gap, so the worker's own count does.
+    for s in summaries:
+        seen = actors.get(s["name"], {"last_seq": -1, "env_steps": 0})
+        lost_batches += max(0, s["batches"] - 1 - int(seen["last_seq"]))
+        lost_items += max(0, s["env_steps"] - int(seen["env_steps"]))
+    placement = {**{k: {"node_id": v["node_id"], "node_ip": v["node_ip"]} for k, v in run.where.items()},
+                 **{s["name"]: {"node_id": s.get("node"), "node_ip": s.get("node_ip")} for s in summaries}}
+    nodes = sorted({p["node_ip"] for p in placement.values() if p.get("node_ip")})
+    lines = [
+        "", "== laneshift run summary ==",
+        f"scenario        {cfg.env.scenario} ({cfg.env.observation}), demo mode {cfg.replay.demo_mode}, "
+        f"{cfg.train.parallel}, {cfg.actor.workers} workers" + (f"; ended by {why}" if why != "done" else ""),
+        f"env steps       {steps:,} in {wall:.0f} s ({steps / max(wall, 1e-6):.0f} steps/s overall), {episodes} episodes",
+        f"ray nodes       {len(nodes)} ({', '.join(nodes)}): " + ", ".join(
+            f"{k} on {v.get('node_ip')}" for k, v in placement.items()),
+        f"replay          {replay.get('tables', {}).get('online', {}).get('inserted', '-')} items stored, "
+        f"{lost_batches} batches ({lost_items} items) lost and counted",
+        f"restarts        " + (", ".join(f"{k} {v}" for k, v in run.deaths.items()) or "none"),
+        f"learner         {last.get('updates', 0):,} updates, final weights version {last.get('version', 0)}",
+        *([f"stopped early   episode {last['stop_reason']['episode']} returned {last['stop_reason']['return']:.3f}"
+           f" >= train.stop_return {cfg.train.stop_return} after {last['stop_reason']['elapsed_s']} s"]
+          if last.get("stop_reason") else []),
+        f"last 100 eps    return {_fmt(last.get('return_mean'))}, length {_fmt(last.get('length_mean'))}, "
+        f"crash rate {_fmt(last.get('crash_rate'))}",
+    ]
+    final = run_dir / "checkpoints" / "final.safetensors"
+    result: dict = {"workers": summaries, "learner": last, "wall_s": round(wall, 1), "env_steps": steps,
+                    "episodes": episodes, "eval": None, "ended_by": why, "placement": placement,
+                    "restarts": dict(run.deaths),
+                    "replay": {"inserted": replay.get("tables", {}).get("online", {}).get("inserted"),
+                               "lost_batches": lost_batches, "lost_items": lost_items,
+                               "rejected": replay.get("rejected")}}
+    if cfg.train.eval_episodes and final.exists() and why in ("done", "stopped"):
+        from laneshift.evaluate import evaluate_checkpoint, format_result
+
+        result["eval"] = evaluate_checkpoint(final, cfg.env, episodes=cfg.train.eval_episodes,
+                                             seed=cfg.train.seed + 12345)
+        lines.append(f"greedy eval     {format_result(result['eval'])}")
+    lines += [f"run dir         {run_dir}", f"checkpoint      {final}", f"tensorboard     tensorboard --logdir {run_dir / 'tb'}"]
+    print("\n".join(lines), file=out, flush=True)
+    return result
+
+
+def _fmt(v: object) -> str:
+    return f"{v:.3f}" if isinstance(v, (int, float)) else "-"
+
+
+# ---------------------------------------------------------------------------- entry point
+
+
+def train(cfg: RunConfig, *, address: str | None = None, out: TextIO = sys.stdout, resume: bool = False,
+          overwrite: bool = False) -> int:
+    """A whole training run. ``address`` None: a private local Ray cluster; else that cluster's.
+    Returns 0 (done), 1 (failed), 130 (SIGINT) or 143 (SIGTERM) after a graceful stop."""
+    signals = StopSignals().install()  # from the very start: a SIGTERM before Ray is a clean exit too
+    started = time.monotonic()
+    run_dir = Path(cfg.train.run_dir).resolve()
+    cfg = cfg.replace(train=dataclasses.replace(cfg.train, run_dir=str(run_dir)),
+                      # Local runs serve the HTTP inspection API on a free loopback port unless told otherwise.
+                      replay=cfg.replay if cfg.replay.http_port != -1 else dataclasses.replace(cfg.replay, http_port=0))
+    lock = RunDirLock(run_dir)
+    ray_conn = RayConnection(address)
+    run: Run | None = None
+    rc = 1
+    try:
+        lock.acquire()
+        prepare_run_dir(run_dir, resume, overwrite, out)
+        ray_conn.open(cfg)  # contacted and authenticated before anything starts
+        signals.install()  # replace Ray's SIGTERM handler (it would abort the cleanup after ~3 s)
+        if signals.received:
+            raise KeyboardInterrupt
+        cfg = ensure_demo_shard(cfg, out)
+        if signals.received:
+            raise KeyboardInterrupt
+        run = Run(cfg, local=address is None, out=out, signals=signals)
+        run.start()
+        why = run.supervise()
+        if why != "done":
+            run._say(f"train: {why} received; stopping gracefully (checkpoints, summary)")
+        run.stop()
+        if run.progress.tty:
+            out.write("\n")
+        result = _summary(run, why, time.monotonic() - started, out)
+        (run_dir / "summary.json").write_text(json.dumps(result, indent=2))
+        rc = {"done": 0, "SIGINT": 130, "SIGTERM": 143}.get(why, 0)
+    except LaunchError as exc:
+        print(f"\ntrain: {exc}", file=out, flush=True)
+        if run is not None:
+            run.stop(graceful_s=30)
+        rc = 1
+    except KeyboardInterrupt:
+        print("\ntrain: interrupted; stopping every component", file=out, flush=True)
+        if run is not None and signals.received:
+            run.stop(graceful_s=30)
+        rc = 130 if signals.received != signal.SIGTERM else 143
+    finally:
+        if run is not None:
+            run.kill_all()
+        ray_conn.close()
+        lock.release()
+        signals.restore()
+    return rc

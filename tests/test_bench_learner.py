@@ -1,0 +1,51 @@
+"""`laneshift bench learner`: a tiny CPU run through the real CLI parser returns every JSON field,
+and both implementations (DoubleDQN.update and the bare torch loop) update at a positive rate.
+No speed thresholds: speed depends on the machine."""
+
+from __future__ import annotations
+
+import json
+
+import torch
+
+from laneshift import bench_learner
+from laneshift.cli import build_parser
+
+
+def test_bench_learner_json_shape(capsys) -> None:
+    threads = torch.get_num_threads()
+    args = build_parser().parse_args(["bench", "learner", "--device", "cpu", "--seconds", "0.02", "--warmup", "0",
+                                      "--json"])
+    assert args.func(args) == 0
+    out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert torch.get_num_threads() == threads  # the bench restores the thread count it changed
+
+    assert out["device"] == "cpu" and out["device_name"] and out["torch"] == torch.__version__
+    assert out["threads"] == 1 and out["rounds"] == 2 and out["cuda"] is None
+    assert [c["name"] for c in out["cases"]] == [c.name for c in bench_learner.CASES]
+    nets = {c["name"]: (c["network"], c["obs_shape"], c["obs_dtype"], c["batch"]) for c in out["cases"]}
+    assert nets == {"mlp-b256": ("MLPQNetwork", [82], "float32", 256),
+                    "cnn-b32": ("NatureCNN", [4, 100, 100], "uint8", 32),
+                    "cnn-b64": ("NatureCNN", [4, 100, 100], "uint8", 64)}
+    for case in out["cases"]:
+        assert case["params"] > 0 and case["n_actions"] == 9
+        for impl in ("learner", "bare"):
+            fig = case[impl]
+            assert fig["updates_per_s"] > 0 and 0 < fig["min"] <= fig["updates_per_s"] <= fig["max"]
+            assert fig["rows_per_s"] == fig["updates_per_s"] * case["batch"]
+            assert len(fig["rounds"]) == 2
+            assert all(r["updates"] >= 1 and r["wall_s"] > 0 and r["updates_per_s"] > 0 for r in fig["rounds"])
+        assert case["learner_over_bare"] > 0
+
+
+def test_bench_learner_table_and_bad_arguments(capsys) -> None:
+    assert bench_learner.main(["--device", "cpu", "--seconds", "0.01", "--warmup", "0", "--cases", "mlp-b256"]) == 0
+    table = capsys.readouterr().out
+    assert "DoubleDQN.update" in table and "mlp-b256" in table and "cnn-b32" not in table
+    for bad in (["--rounds", "1"], ["--cases", "nope"], ["--seconds", "0"]):
+        try:
+            bench_learner.main(["--device", "cpu", *bad])
+        except SystemExit as exc:
+            assert "bench learner" in str(exc)
+        else:
+            raise AssertionError(f"{bad} accepted")

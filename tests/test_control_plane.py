@@ -1,0 +1,206 @@
+"""The control plane stays bounded and the run's state knows its owner: stats replies the same
+size for 2 or 4,096 actors, per-actor stats paged, a restarted actor's resume point, sequence
+gaps counted in items, checkpoints refused across runs, the rate limiter not frozen after a
+restore, checkpoint writes that fail on a full disk, and the learner surviving a bad reply."""
+
+from __future__ import annotations
+
+import errno
+import os
+import subprocess
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from laneshift import wire
+from laneshift.config import ConfigError, ReplayConfig, load_run_config
+from laneshift.deploy.builder import Builder
+from laneshift.replay_server.checkpoint import CheckpointError, restore_checkpoint, write_checkpoint
+from laneshift.replay_server.core import ACTORS_IN_STATS, MAX_ACTOR_PAGE, ReplayCore
+
+SCHEMA = wire.TransitionSchema((4,), "float32", 9)
+
+
+def msg(actor: str, seq: int, n: int = 1, env_steps: int | None = None) -> bytes:
+    obs = np.zeros((n, 4), np.float32)
+    return wire.encode_transitions(wire.TransitionBatch.from_arrays(
+        actor=actor, seq=seq, weights_version=0, phase=0, env_steps=(seq + 1) * n if env_steps is None else env_steps,
+        obs=obs, action=np.zeros(n), reward=np.zeros(n, np.float32), next_obs=obs, terminated=np.zeros(n),
+        truncated=np.zeros(n)))
+
+
+def test_stats_reply_size_does_not_grow_with_the_number_of_actors():
+    sizes = {}
+    for n in (2, 4096):
+        core = ReplayCore(ReplayConfig(capacity=10_000, min_size=1), SCHEMA)
+        for i in range(n):
+            assert core.ingest(msg(f"a{i:05d}", 0)) is None
+        body = wire.encode_json(core.stats())  # what the replay/stats queryable sends
+        sizes[n] = len(body)
+        stats = wire.decode_json(body)
+        assert stats["actors_total"]["count"] == n and stats["actors_total"]["items"] == n
+        assert len(stats["actors"]) == min(n, ACTORS_IN_STATS)
+    assert sizes[4096] < 2 * sizes[2] + 4096, sizes  # flat, and far below the 64 KiB JSON limit
+    page = core.handle_control({"cmd": "actors", "offset": 4000, "limit": 10_000})
+    assert page["ok"] and page["total"] == 4096 and len(page["actors"]) == 96
+    assert list(page["actors"])[0] == "a04000"
+    assert len(core.actor_page(0, 10**6)["actors"]) == MAX_ACTOR_PAGE
+    assert len(wire.encode_json(core.actor_page(0, MAX_ACTOR_PAGE))) < wire.MAX_HEADER_BYTES
+
+
+def test_resume_point_and_lost_items_of_a_gap():
+    core = ReplayCore(ReplayConfig(capacity=1000, min_size=1), SCHEMA)
+    assert core.actor_state("w0") == {"env_steps": 0, "next_seq": 0, "known": 0}
+    for seq in range(3):
+        core.ingest(msg("w0", seq, n=10))
+    assert core.actor_state("w0") == {"env_steps": 30, "next_seq": 3, "known": 1}
+    core.ingest(msg("w0", 6, n=10))  # seq 3, 4, 5 never arrived: 3 batches, 30 items
+    assert core.actors["w0"]["lost_batches"] == 3 and core.actors["w0"]["lost_items"] == 30
+    # A server with no record (restarted without a checkpoint) counts an actor's first batches too.
+    fresh = ReplayCore(ReplayConfig(capacity=1000, min_size=1), SCHEMA)
+    fresh.ingest(msg("w0", 7, n=10))
+    assert fresh.actors["w0"]["lost_batches"] == 7 and fresh.actors["w0"]["lost_items"] == 70
+
+
+def test_checkpoint_of_another_run_is_refused_and_restore_does_not_freeze_inserts(tmp_path):
+    cfg = ReplayConfig(capacity=1000, min_size=10, samples_per_insert=8, spi_tolerance=64)
+    core = ReplayCore(cfg, SCHEMA)
+    core.identity = {"run_id": "a", "config_digest": "x"}
+    for seq in range(40):
+        core.ingest(msg("w0", seq, n=10))
+    assert not core.insert_allowed()  # 390 items owe the learner 3,120 rows: actors wait
+    write_checkpoint(core, tmp_path / "ckpt")
+    other = ReplayCore(cfg, SCHEMA)
+    other.identity = {"run_id": "b", "config_digest": "x"}
+    with pytest.raises(CheckpointError, match="run_id 'a'"):
+        restore_checkpoint(other, tmp_path / "ckpt")
+    same = ReplayCore(cfg, SCHEMA)
+    same.identity = {"run_id": "a", "config_digest": "x"}
+    assert restore_checkpoint(same, tmp_path / "ckpt") == 400
+    assert same.insert_allowed()  # restored items count as sampled already: actors go on at once
+
+
+@pytest.fixture
+def tiny_disk(tmp_path):
+    """A 1 MiB tmpfs: a real full disk (needs root and mount; skipped otherwise)."""
+    mnt = tmp_path / "disk"
+    mnt.mkdir()
+    if os.geteuid() != 0:
+        pytest.skip("mounting a tmpfs needs root")
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(mnt)], capture_output=True, text=True)
+    if r.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here: {r.stderr.strip()}")
+    try:
+        yield mnt
+    finally:
+        subprocess.run(["umount", "-l", str(mnt)], check=False)
+
+
+def test_a_full_disk_fails_the_checkpoint_with_oserror_and_keeps_the_old_one(tiny_disk):
+    """numpy memmap copies died with SIGBUS on a full disk; ordinary writes raise OSError."""
+    schema = wire.TransitionSchema((64,), "float32", 9)
+    small = ReplayCore(ReplayConfig(capacity=200, min_size=1), schema)
+    obs = np.ones((100, 64), np.float32)
+    small.ingest(wire.encode_transitions(wire.TransitionBatch.from_arrays(
+        actor="w0", seq=0, weights_version=0, phase=0, env_steps=100, obs=obs, action=np.zeros(100),
+        reward=np.zeros(100, np.float32), next_obs=obs, terminated=np.zeros(100), truncated=np.zeros(100))))
+    assert write_checkpoint(small, tiny_disk / "ckpt")["items"] == 100  # ~110 KB: fits
+    big = ReplayCore(ReplayConfig(capacity=5000, min_size=1), schema)  # ~2.7 MB: does not
+    with pytest.raises(OSError) as err:
+        write_checkpoint(big, tiny_disk / "ckpt")
+    assert err.value.errno == errno.ENOSPC
+    fresh = ReplayCore(ReplayConfig(capacity=200, min_size=1), schema)
+    assert restore_checkpoint(fresh, tiny_disk / "ckpt") == 100  # the previous checkpoint is intact
+
+
+def test_learner_links_read_an_error_reply_as_no_answer():
+    from laneshift.learner.links import _json_or_none
+
+    assert _json_or_none(None) is None
+    assert _json_or_none(wire.encode_error("too_large", "x")) is None
+    assert _json_or_none(b"garbage") is None
+    assert _json_or_none(wire.encode_json({"ok": True})) == {"ok": True}
+
+
+def test_deploy_config_and_placements():
+    cfg = load_run_config(overrides={"actor.workers": 3, "transport.run_id": "r1",
+                                     "deploy.learner_resources": '{"GPU": 1, "laneshift_learner": 1}',
+                                     "deploy.replay_resources": "laneshift_replay=1,big_mem=0.5",
+                                     "deploy.max_restarts": 2})
+    b = Builder(cfg)
+    learner = b.placement("learner").ray_options()
+    assert learner["num_gpus"] == 1.0 and learner["resources"] == {"laneshift_learner": 1.0}
+    assert learner["name"] == "r1-learner" and learner["max_restarts"] == 2 and learner["max_concurrency"] > 1
+    assert b.placement("replay-server").ray_options()["resources"] == {"laneshift_replay": 1.0, "big_mem": 0.5}
+    assert b.placement("w2").ray_options()["num_cpus"] == 1.0 and "resources" not in b.placement("w2").ray_options()
+    assert b.budgets == [7, 7, 6] or sum(b.budgets) == cfg.train.env_steps
+    with pytest.raises(ValueError):
+        b.placement("w3")
+    assert b.router_port(local=False) == 7447
+    with pytest.raises(ConfigError, match="deploy.worker_resources"):
+        load_run_config(overrides={"deploy.worker_resources": '{"CPU": 2}'})
+    with pytest.raises(ConfigError, match="deploy.replay_resources"):
+        load_run_config(overrides={"deploy.replay_resources": "nonsense"})
+    with pytest.raises(ConfigError, match="learner.device"):
+        load_run_config(overrides={"learner.device": "tpu"})
+
+
+class _NoLinks:
+    """LearnerLinks that record what the learner publishes (no replay server needed)."""
+
+    def __init__(self):
+        self.versions: list[int] = []
+
+    def publish_weights(self, payload: bytes) -> None:
+        self.versions.append(wire.decode_weights(payload).version)
+
+    def publish_stats(self, payload: bytes) -> None: ...
+    def replay_stats(self): return None
+    def replay_control(self, body): return {"ok": True}
+    def take_episodes(self): return []
+    def stop_requested(self): return False
+
+
+def test_a_restarted_learner_resumes_its_state_above_every_published_version(tmp_path):
+    from laneshift.envspec import env_spec
+    from laneshift.learner.loop import Learner
+
+    cfg = load_run_config(overrides={"env.scenario": "lka", "train.run_dir": str(tmp_path), "learner.hidden": "16"})
+    spec = env_spec(cfg.env)
+    first = Learner(cfg, spec, _NoLinks(), threading.Event())
+    batch = {"obs": np.zeros((8, *spec.schema.obs_shape), np.float32), "action": np.zeros(8, np.int64),
+             "reward": np.ones(8, np.float32), "next_obs": np.zeros((8, *spec.schema.obs_shape), np.float32),
+             "terminated": np.zeros(8, np.uint8), "steps": np.ones(8, np.uint8)}
+    for _ in range(5):
+        first.agent.update(batch)
+    first.version = 3
+    assert first.save_state()
+    first.version = 9  # published after the state was saved: a restart must not reuse 4..9
+    first.publish()
+    second = Learner(cfg, spec, _NoLinks(), threading.Event())
+    assert second.restored_from == {"updates": 5, "version": 10, "phase": 0, "path": str(second.state_path)}
+    for a, b in zip(first.agent.optimizer.state_dict()["state"].values(),
+                    second.agent.optimizer.state_dict()["state"].values()):
+        assert torch_equal(a["exp_avg"], b["exp_avg"])
+
+
+def torch_equal(a, b) -> bool:
+    import torch
+
+    return bool(torch.equal(a, b))
+
+
+def test_learner_checkpoint_on_an_unwritable_path_is_counted_not_fatal(tmp_path):
+    from laneshift.envspec import env_spec
+    from laneshift.learner.loop import Learner
+
+    cfg = load_run_config(overrides={"env.scenario": "lka", "train.run_dir": str(tmp_path), "learner.hidden": "16"})
+    learner = Learner(cfg, env_spec(cfg.env), _NoLinks(), threading.Event())
+    (tmp_path / "checkpoints").write_text("a file where the directory should be")  # every write fails
+    assert learner.checkpoint("latest") is None
+    assert learner.save_state() is False
+    learner.publish()
+    assert learner.checkpoint_failures == 3

@@ -1,0 +1,266 @@
+"""Faults against a real 2-worker local run: every component is a Ray actor that Ray restarts.
+
+Each test kills one process with SIGKILL mid-run (found through ``<run dir>/logs/<name>.pid``)
+and checks that the run completes, that the component came back, and that every transition a
+worker made is either stored or counted as lost (``lost_items``), never silently missing. Also:
+the launcher's SIGTERM and SIGKILL, the run-dir lock and refusal, and ``--resume``.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from laneshift.config import load_run_config
+from laneshift.deploy.local import train_local
+
+FAST = {"env.scenario": "lka", "actor.workers": 2, "actor.send_every": 50, "actor.epsilon_decay_steps": 1000,
+        "learner.hidden": "64,64", "learner.batch_size": 64, "learner.publish_every": 10,
+        "learner.checkpoint_every": 100, "learner.checkpoint_every_s": 1.0, "replay.samples_per_insert": 8,
+        "replay.spi_tolerance": 1024, "replay.min_size": 200, "train.eval_episodes": 0, "train.log_every_s": 0.5}
+
+
+def _env_steps(run_dir: Path) -> int:
+    """The newest env-step count the learner logged (0 before the first log line)."""
+    path = run_dir / "metrics.jsonl"
+    try:
+        lines = path.read_text().splitlines()
+    except OSError:
+        return 0
+    for line in reversed(lines):
+        try:
+            rec = json.loads(line)
+        except json.JSONDecodeError:
+            continue
+        if rec.get("kind") == "learner" and "env_steps" in rec:
+            return int(rec["env_steps"])
+    return 0
+
+
+class Killer(threading.Thread):
+    """Kills ``component``'s process with SIGKILL once the run has made ``at_steps`` env steps."""
+
+    def __init__(self, run_dir: Path, component: str, at_steps: int, extra=lambda: True, timeout_s: float = 150):
+        super().__init__(daemon=True)
+        self.run_dir, self.component, self.at_steps, self.extra = run_dir, component, at_steps, extra
+        self.timeout_s = timeout_s
+        self.killed_pid: int | None = None
+
+    def run(self) -> None:
+        deadline = time.monotonic() + self.timeout_s
+        pid_file = self.run_dir / "logs" / f"{self.component}.pid"
+        while time.monotonic() < deadline:
+            if pid_file.exists() and _env_steps(self.run_dir) >= self.at_steps and self.extra():
+                pid = int(pid_file.read_text())
+                os.kill(pid, signal.SIGKILL)
+                self.killed_pid = pid
+                return
+            time.sleep(0.05)
+
+
+def run_with_fault(tmp_path: Path, component: str, at_steps: int, total: int = 6000, extra=lambda: True, **overrides):
+    run_dir = tmp_path / "run"
+    cfg = load_run_config(overrides={**FAST, "train.run_dir": str(run_dir), "train.env_steps": total, **overrides})
+    killer = Killer(run_dir, component, at_steps, extra)
+    killer.start()
+    out = io.StringIO()
+    rc = train_local(cfg, out=out)
+    killer.join(1)
+    text = out.getvalue()
+    assert killer.killed_pid, f"{component} was never killed:\n{text}"
+    assert rc == 0, text
+    summary = json.loads((run_dir / "summary.json").read_text())
+    replay = json.loads((run_dir / "replay_stats.json").read_text())
+    assert f"{component} died" in text and "Ray restarted it" in text, text
+    assert summary["restarts"] == {component: 1}, summary["restarts"]
+    assert sum(w["env_steps"] for w in summary["workers"]) == total, summary["workers"]
+    # Every transition made is stored or counted as lost: nothing silently missing.
+    stored = replay["tables"]["online"]["inserted"]
+    assert stored + summary["replay"]["lost_items"] == total, (stored, summary["replay"])
+    return run_dir, summary, replay, text
+
+
+def test_env_worker_killed_is_restarted_and_resumes_its_share(tmp_path):
+    run_dir, summary, replay, _ = run_with_fault(tmp_path, "w1", at_steps=1500)
+    w1 = next(w for w in summary["workers"] if w["name"] == "w1")
+    assert w1["restarts"] == 1 and w1["resumed_at"] > 0  # went on from what the replay server had stored
+    assert summary["replay"]["lost_items"] == 0  # a dying worker loses only unsent steps, which it redoes
+
+
+def test_learner_killed_comes_back_from_its_state_with_a_higher_version(tmp_path):
+    state = tmp_path / "run" / "checkpoints" / "learner_state.pt"
+    since: list[float] = []
+
+    def saved_after_training_began() -> bool:  # a state with updates in it, not the first empty one
+        since.append(since[0] if since else time.time())
+        return state.exists() and state.stat().st_mtime > since[0]
+
+    run_dir, summary, replay, _ = run_with_fault(tmp_path, "learner", at_steps=1500, extra=saved_after_training_began)
+    log = (run_dir / "logs" / "learner.log").read_text()
+    assert "restored" in log and "restarted by Ray" in log
+    # Versions never went backwards: every worker's versions, in the order it used them, only grow.
+    for w in summary["workers"]:
+        versions = [v for v, _ in w["version_runs"]]
+        assert versions == sorted(versions), versions
+    assert summary["learner"]["restored_from"]["updates"] > 0
+
+
+def test_router_killed_comes_back_on_the_same_endpoint(tmp_path):
+    run_dir, summary, replay, text = run_with_fault(tmp_path, "router", at_steps=1500)
+    log = (run_dir / "logs" / "router.log").read_text()
+    endpoints = {line.split("listening on ")[1].strip() for line in log.splitlines() if "listening on" in line}
+    assert len(endpoints) == 1, log  # same endpoint after the restart: every client reconnected
+
+
+def test_replay_server_killed_before_its_first_checkpoint_counts_every_loss(tmp_path):
+    """No checkpoint to restore: what it had stored is lost, and counted (it used to read 0 lost)."""
+    run_dir, summary, replay, text = run_with_fault(tmp_path, "replay-server", at_steps=1500,
+                                                    **{"replay.checkpoint_every_s": 0})
+    assert summary["replay"]["lost_items"] >= 1000, summary["replay"]
+
+
+def test_replay_server_killed_after_a_checkpoint_restores_it(tmp_path):
+    meta = tmp_path / "run" / "replay_checkpoint" / "meta.json"
+    run_dir, summary, replay, text = run_with_fault(
+        tmp_path, "replay-server", at_steps=1500, extra=lambda: meta.exists() and json.loads(meta.read_text())["items"] >= 500,
+        **{"replay.checkpoint_every_s": 0.5})
+    log = (run_dir / "logs" / "replay-server.log").read_text()
+    assert "restored" in log
+
+
+def test_a_used_run_dir_is_refused_and_a_second_launcher_too(tmp_path):
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    (run_dir / "config.yaml").write_text("{}\n")
+    out = io.StringIO()
+    cfg = load_run_config(overrides={**FAST, "train.run_dir": str(run_dir)})
+    assert train_local(cfg, out=out) == 1
+    assert "already holds a run" in out.getvalue() and "--resume" in out.getvalue()
+
+    from laneshift.deploy.launch import LaunchError, RunDirLock
+
+    other = tmp_path / "other"
+    with pytest.raises(LaunchError, match="in use by another"):
+        held = RunDirLock(other).acquire()
+        try:
+            RunDirLock(other).acquire()
+        finally:
+            held.release()
+
+
+def _launcher(tmp_path: Path, *extra: str) -> subprocess.Popen:
+    cmd = [sys.executable, "-m", "laneshift", "train", "--local", "--workers", "2", "--scenario", "lka",
+           "--run-dir", str(tmp_path / "run"), "--set", "train.log_every_s=0.5", "--set", "learner.hidden=32",
+           "--set", "train.eval_episodes=0", "--set", "learner.checkpoint_every_s=1", *extra]
+    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+
+
+def _wait_training(proc: subprocess.Popen, timeout_s: float = 120) -> list[str]:
+    lines: list[str] = []
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        line = proc.stdout.readline()
+        if not line and proc.poll() is not None:
+            break
+        lines.append(line)
+        if " upd " in line and "steps       0/" not in line:
+            return lines
+    pytest.fail("training never started:\n" + "".join(lines))
+
+
+def _descendants(pid: int) -> set[int]:
+    out = subprocess.run(["ps", "-e", "-o", "pid=,ppid="], capture_output=True, text=True).stdout
+    children: dict[int, list[int]] = {}
+    for row in out.split("\n"):
+        if row.strip():
+            p, pp = map(int, row.split())
+            children.setdefault(pp, []).append(p)
+    found, todo = set(), [pid]
+    while todo:
+        for c in children.get(todo.pop(), []):
+            if c not in found:
+                found.add(c)
+                todo.append(c)
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+def test_sigterm_ends_gracefully_and_resume_finishes_the_budget(tmp_path):
+    """SIGTERM (what `ray job stop`, systemd and Kubernetes send): checkpoints and a summary, no
+    process left; then `--resume` goes on from there and spends exactly the rest of the budget."""
+    proc = _launcher(tmp_path, "--env-steps", "6000")
+    try:
+        lines = _wait_training(proc)
+        family = _descendants(proc.pid)
+        proc.send_signal(signal.SIGTERM)
+        rest, _ = proc.communicate(timeout=90)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    text = "".join(lines) + rest
+    assert proc.returncode == 143, text
+    assert "SIGTERM received; stopping gracefully" in text
+    run_dir = tmp_path / "run"
+    first = json.loads((run_dir / "summary.json").read_text())
+    assert first["ended_by"] == "SIGTERM"
+    assert (run_dir / "checkpoints" / "learner_state.pt").exists()
+    assert (run_dir / "replay_checkpoint" / "meta.json").exists()
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and any(_alive(p) for p in family):
+        time.sleep(0.2)
+    assert not [p for p in family if _alive(p)], "processes left behind"
+    done_before = sum(w["env_steps"] for w in first["workers"])
+    assert 0 < done_before < 6000
+
+    resumed = subprocess.run([sys.executable, "-m", "laneshift", "train", "--local", "--resume", str(run_dir)],
+                             capture_output=True, text=True, timeout=300)
+    assert resumed.returncode == 0, resumed.stdout + resumed.stderr
+    second = json.loads((run_dir / "summary.json").read_text())
+    assert sum(w["env_steps"] for w in second["workers"]) == 6000
+    assert {w["name"]: w["resumed_at"] for w in second["workers"]} == {
+        w["name"]: w["env_steps"] for w in first["workers"]}
+    assert second["learner"]["restored_from"]["version"] > first["learner"]["version"]
+
+
+def test_launcher_killed_leaves_no_process_and_no_temp_dir(tmp_path):
+    proc = _launcher(tmp_path, "--env-steps", "10000000")
+    try:
+        _wait_training(proc)
+        family = _descendants(proc.pid)
+        assert len(family) >= 5, family
+        tmp_dirs = {p for p in Path(os.environ.get("TMPDIR", "/tmp")).glob("lsray-*")
+                    if any(str(p) in _cmdline(pid) for pid in family)}
+        proc.kill()
+        proc.wait(10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and (any(_alive(p) for p in family) or any(d.exists() for d in tmp_dirs)):
+        time.sleep(0.2)
+    assert not [p for p in family if _alive(p)], [(p, _cmdline(p)[:80]) for p in family if _alive(p)]
+    assert not [d for d in tmp_dirs if d.exists()]
+
+
+def _cmdline(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+    except OSError:
+        return ""
