@@ -13,6 +13,12 @@ import zenoh
 from laneshift import transport, wire
 
 
+#: Batches a worker may have sent that the replay server has not stored yet, and how often
+#: (in batches) it asks: a bound on what a cut link can lose or queue, at one query per 16 batches.
+MAX_IN_FLIGHT = 64
+ACK_EVERY = 16
+
+
 class ZenohActorLinks:
     def __init__(self, session: zenoh.Session, run_id: str, name: str, timeout_s: float = 5.0):
         self.session, self.run_id, self.timeout_s = session, run_id, timeout_s
@@ -23,16 +29,44 @@ class ZenohActorLinks:
         self._flow = transport.LatestValue(session, wire.replay_flow_key(run_id))
         self._insert_ok = True
         self._last_query = 0.0
-        self._first_send = True
+        self.name = name
+        self._sent = 0  # batches sent by this session
+        self._base_seq: int | None = None  # the server's next_seq for us before our first batch
 
     def send_transitions(self, payload: bytes) -> None:
-        if self._first_send:
-            # First batch only: wait for the replay server's subscription to reach this session.
-            # If it never does, send anyway (the server counts the gap in seq as lost batches)
-            # and do not wait again: the hot path must not pay timeout_s per batch.
-            self._first_send = False
+        if not self._transitions.matching_status.matching:
+            # Nobody subscribed as far as this session knows (the first batch, or the router or
+            # replay server is coming back): a put now would go nowhere, so wait for the match
+            # (bounded: after timeout_s it is sent anyway and the server counts the gap as lost).
             transport.wait_matching(self._transitions, self.timeout_s)
+        if self._sent % ACK_EVERY == 0:
+            self._bound_in_flight()
         self._transitions.put(payload)
+        self._sent += 1
+
+    def _stored_next_seq(self) -> int | None:
+        reply = transport.query(self.session, wire.replay_control_key(self.run_id),
+                                wire.encode_json({"cmd": "actor_state", "actor": self.name}), self.timeout_s)
+        try:
+            body = wire.decode_json(reply) if reply is not None else {}
+        except wire.WireError:
+            return None
+        return int(body["next_seq"]) if body.get("ok") else None
+
+    def _bound_in_flight(self) -> None:
+        """Wait while more than MAX_IN_FLIGHT of this worker's batches are sent but not stored.
+
+        The rate limiter only sees what arrived; on a cut link a worker ran 10,000 steps ahead of
+        what was stored, and lost them all when its budget ended during the cut. A query every
+        ACK_EVERY batches keeps that loss (and the memory queued behind the link) bounded.
+        """
+        stored = self._stored_next_seq()
+        if self._base_seq is None:
+            self._base_seq = stored if stored is not None else 0
+            return
+        while stored is not None and self._base_seq + self._sent - stored > MAX_IN_FLIGHT and not self.stop_requested():
+            time.sleep(0.05)
+            stored = self._stored_next_seq()
 
     def send_episode(self, payload: bytes) -> None:
         self._episodes.put(payload)

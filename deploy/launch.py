@@ -347,19 +347,25 @@ class Run:
 
     # -- start
 
-    def _start(self, component: str, cls: Any, *args: Any) -> Any:
+    def _create(self, component: str, cls: Any, *args: Any) -> Any:
+        handle = cls.options(**self.builder.placement(component).ray_options()).remote(*args)
+        self.handles[component] = handle
+        return handle
+
+    def _await_started(self, components: list[str]) -> None:
+        """Wait until each component answers ``info()``: placed, built and serving (or say why not)."""
         import ray
 
-        placement = self.builder.placement(component)
-        handle = cls.options(**placement.ray_options()).remote(*args)
-        self.handles[component] = handle
-        try:
-            self.where[component] = ray.get(handle.info.remote(), timeout=self.cfg.deploy.start_timeout_s)
-        except ray.exceptions.GetTimeoutError:
-            raise LaunchError(_not_started(component, placement, self.cfg.deploy.start_timeout_s)) from None
-        except ray.exceptions.RayActorError as exc:
-            raise LaunchError(f"{component} failed to start: {_cause(exc)}") from None
-        return handle
+        deadline = time.monotonic() + self.cfg.deploy.start_timeout_s
+        for component in components:
+            try:
+                self.where[component] = ray.get(self.handles[component].info.remote(),
+                                                timeout=max(0.1, deadline - time.monotonic()))
+            except ray.exceptions.GetTimeoutError:
+                raise LaunchError(_not_started(component, self.builder.placement(component),
+                                               self.cfg.deploy.start_timeout_s)) from None
+            except ray.exceptions.RayActorError as exc:
+                raise LaunchError(f"{component} failed to start: {_cause(exc)}") from None
 
     def start(self) -> None:
         import ray
@@ -369,29 +375,23 @@ class Run:
         cfg = self.cfg
         host = cfg.deploy.advertise_host or ("127.0.0.1" if self.local else "")
         port = self.builder.router_port(self.local)
-        self._start("router", RouterActor, cfg.to_dict(), port, host)
+        self._create("router", RouterActor, cfg.to_dict(), port, host)
+        self._await_started(["router"])
         endpoint = self.where["router"]["endpoint"]
         # From here on every component is a client of the router where it landed.
         cfg = self.cfg = cfg.replace(transport=dataclasses.replace(cfg.transport, router=endpoint))
         self.builder = Builder(cfg)
         save_run_config(cfg, Path(cfg.train.run_dir) / "config.yaml")
         plain = cfg.to_dict()
-        self._start("replay-server", ReplayServerActor, plain)
-        self._start("learner", LearnerActor, plain)
+        # The rest start together (each retries until the ones it needs answer): faster than in turn.
+        self._create("replay-server", ReplayServerActor, plain)
+        self._create("learner", LearnerActor, plain)
         worker_plain = plain
         if cfg.deploy.worker_router:  # workers reach the router through a relay or proxy
             worker_plain = cfg.replace(transport=dataclasses.replace(cfg.transport, router=cfg.deploy.worker_router)).to_dict()
         for i, name in enumerate(self.builder.workers):
-            self.handles[name] = EnvWorkerActor.options(**self.builder.placement(name).ray_options()).remote(worker_plain, i)
-        workers = self.builder.workers
-        try:
-            found = ray.get([self.handles[n].info.remote() for n in workers], timeout=self.cfg.deploy.start_timeout_s)
-        except ray.exceptions.GetTimeoutError:
-            raise LaunchError(_not_started("env workers", self.builder.placement(workers[0]),
-                                           self.cfg.deploy.start_timeout_s)) from None
-        except ray.exceptions.RayActorError as exc:
-            raise LaunchError(f"an env worker failed to start: {_cause(exc)}") from None
-        self.where.update(zip(workers, found))
+            self._create(name, EnvWorkerActor, worker_plain, i)
+        self._await_started(["replay-server", "learner", *self.builder.workers])
         for name in SERVICES:
             self.refs[name] = self.handles[name].run.remote()
         for name, share in zip(self.builder.workers, self.builder.budgets):

@@ -17,17 +17,17 @@ import threading
 
 import zenoh
 
-from laneshift.transport import session_config, use_service_runtime
+from laneshift.transport import DEFAULT_MAX_MESSAGE_BYTES, session_config, use_service_runtime
 
 
 class Router:
-    def __init__(self, listen: str):
-        self.listen = listen
+    def __init__(self, listen: str, max_message_bytes: int = DEFAULT_MAX_MESSAGE_BYTES):
+        self.listen, self.max_message_bytes = listen, max_message_bytes
         self._session: zenoh.Session | None = None
 
     def start(self) -> "Router":
         use_service_runtime()
-        self._session = zenoh.open(session_config(self.listen, "router"))
+        self._session = zenoh.open(session_config(self.listen, "router", self.max_message_bytes))
         print(f"router: listening on {self.listen}", flush=True)
         return self
 

@@ -178,6 +178,7 @@ class ReplayServer:
         core.identity = {"run_id": cfg.transport.run_id, "config_digest": config_digest(cfg)}
         self.demo_digest = core.demo.digest()
         self.checkpoint_dir = Path(cfg.train.run_dir) / "replay_checkpoint"
+        self._lock_checkpoint_dir()
         if cfg.replay.restore and (self.checkpoint_dir / "meta.json").exists():
             self.restored = restore_checkpoint(core, self.checkpoint_dir)  # CheckpointError: named
             print(f"replay-server: restored {self.restored} items from {self.checkpoint_dir}", flush=True)
@@ -208,6 +209,22 @@ class ReplayServer:
               f"demo sha256 {stats['tables']['demo']['sha256'][:12] or '-'})", flush=True)
         return {"http_port": self.http_port, "restored": self.restored}
 
+    def _lock_checkpoint_dir(self) -> None:
+        """One live replay server per run dir: a second would restore, then overwrite, the first
+        one's checkpoint. The lock goes with the process (kill -9 included), so a restart gets it."""
+        import fcntl
+
+        path = self.checkpoint_dir.with_name("replay_checkpoint.lock")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise ValueError(f"another replay server is using {self.checkpoint_dir.parent} (its run dir): give "
+                             f"this one its own train.run_dir") from None
+        self._lock_fd = fd
+
     def stop(self) -> dict:
         """Final checkpoint (SIGTERM/SIGINT keep everything received), stats file, sessions closed."""
         self._stop.set()
@@ -231,6 +248,9 @@ class ReplayServer:
 
     def close(self) -> None:
         self._stop.set()
+        if getattr(self, "_lock_fd", None) is not None:
+            os.close(self._lock_fd)
+            self._lock_fd = None
         for session in self._sessions:
             try:
                 session.close()

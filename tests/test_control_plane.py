@@ -204,3 +204,19 @@ def test_learner_checkpoint_on_an_unwritable_path_is_counted_not_fatal(tmp_path)
     assert learner.save_state() is False
     learner.publish()
     assert learner.checkpoint_failures == 3
+
+
+def test_a_second_replay_server_on_the_same_run_dir_is_refused(tmp_path):
+    from laneshift.replay_server.service import ReplayServer
+
+    cfg = load_run_config(overrides={"env.scenario": "lka", "train.run_dir": str(tmp_path)})
+    first = ReplayServer(cfg)
+    first.checkpoint_dir = tmp_path / "replay_checkpoint"
+    first._lock_checkpoint_dir()
+    second = ReplayServer(cfg)
+    second.checkpoint_dir = tmp_path / "replay_checkpoint"
+    with pytest.raises(ValueError, match="another replay server is using"):
+        second._lock_checkpoint_dir()
+    first.close()
+    second._lock_checkpoint_dir()  # free again once the first one is gone
+    second.close()

@@ -259,6 +259,17 @@ class TransportConfig:
     router: str = "tcp/127.0.0.1:7447"  # the endpoint clients connect to and the router listens on
     run_id: str = "run"  # namespace in every key expression: laneshift/<run_id>/...
     timeout_s: float = 5.0  # query timeout
+    # zenoh drops a received message larger than this before buffering it (hostile or broken
+    # senders cannot balloon the router's or the replay server's memory). 0 = sized from the run:
+    # twice its largest message (a sample reply), at least 16 MiB.
+    max_message_mb: float = 0.0
+    largest_message_bytes: int = 0  # set by RunConfig from the run's settings; not a user setting
+
+    @property
+    def max_message_bytes(self) -> int:
+        if self.max_message_mb:
+            return int(self.max_message_mb * 2**20)
+        return max(16 * 2**20, 2 * self.largest_message_bytes)
 
     def __post_init__(self) -> None:
         _check(self.router.startswith(("tcp/", "udp/", "unixsock-stream/")), "transport.router",
@@ -267,6 +278,8 @@ class TransportConfig:
 
         _check(bool(_NAME.fullmatch(self.run_id)), "transport.run_id", "must match [A-Za-z0-9_-]{1,64}", self.run_id)
         _check(self.timeout_s > 0, "transport.timeout_s", "must be > 0", self.timeout_s)
+        _check(self.max_message_mb >= 0, "transport.max_message_mb", "must be >= 0 (0 = sized from the run)",
+               self.max_message_mb)
 
 
 @dataclass(frozen=True)
@@ -357,6 +370,16 @@ class RunConfig:
     deploy: DeployConfig = field(default_factory=DeployConfig)
 
     def __post_init__(self) -> None:
+        # The run's largest message is a sample reply (two observations a row); grayscale frames
+        # are 4 x 100 x 100 bytes, vector observations at most a few hundred floats.
+        obs_bytes = 4 * 100 * 100 if self.env.observation == "grayscale" else 4 * 512
+        largest = self.learner.batch_size * max(self.learner.prefetch, self.learner.updates_per_round) * (2 * obs_bytes + 64)
+        if self.transport.largest_message_bytes != largest:
+            object.__setattr__(self, "transport", dataclasses.replace(self.transport, largest_message_bytes=largest))
+        if self.transport.max_message_mb and self.transport.max_message_bytes < largest:
+            raise ConfigError(f"transport.max_message_mb: a sample reply of this run takes up to "
+                              f"{largest / 2**20:.1f} MiB, so the limit must be above that, "
+                              f"got {self.transport.max_message_mb!r}")
         rows = self.learner.batch_size * max(self.learner.prefetch, self.learner.updates_per_round)
         if self.replay.samples_per_insert and rows > self.replay.spi_tolerance:
             raise ConfigError(f"replay.spi_tolerance: must be >= the rows of one sample request "

@@ -28,11 +28,21 @@ from .config import TransportConfig
 from .wire import Kind, WireError, decode_error, decode_json, encode_error, peek_kind
 
 
-def session_config(endpoint: str, mode: str) -> zenoh.Config:
-    """A zenoh config: ``router`` listens on ``endpoint``, ``client`` connects to it."""
+#: zenoh's own limit on a received message unless the run's config sets one (zenoh's default: 1 GiB).
+DEFAULT_MAX_MESSAGE_BYTES = 64 * 2**20
+
+
+def session_config(endpoint: str, mode: str, max_message_bytes: int = DEFAULT_MAX_MESSAGE_BYTES) -> zenoh.Config:
+    """A zenoh config: ``router`` listens on ``endpoint``, ``client`` connects to it.
+
+    ``max_message_bytes``: a larger message is dropped by the receiving link before it is
+    buffered whole (laneshift's own size checks only run after zenoh received all of it: a few
+    256 MiB messages took the replay server to ~1.5 GB and the router to ~0.9 GB).
+    """
     if mode not in ("router", "client"):
         raise ValueError(f"mode must be router or client, got {mode!r}")
     conf = zenoh.Config()
+    conf.insert_json5("transport/link/rx/max_message_size", str(int(max_message_bytes)))
     conf.insert_json5("mode", json.dumps(mode))
     conf.insert_json5("scouting/multicast/enabled", "false")
     conf.insert_json5("scouting/gossip/enabled", "false")
@@ -48,6 +58,11 @@ def session_config(endpoint: str, mode: str) -> zenoh.Config:
     # A BLOCK put that waits this long closes the link, losing what is queued: 60 s instead of 5,
     # so a replay server busy for seconds (a large checkpoint, a swapping machine) only slows actors.
     conf.insert_json5("transport/link/tx/queue/congestion_control/block/wait_before_close", "60000000")
+    # A session survives a link that is silent for up to 30 s (zenoh's default lease: 10 s). On a
+    # 10 s network cut between two hosts the default lease expired in half the runs; a put blocked
+    # on the dead link then held the session for wait_before_close (60 s) and its queue was lost.
+    # With 30 s, the same cut resumed about 1 s after the link came back (tests/test_network_faults.py).
+    conf.insert_json5("transport/link/tx/lease", "30000")
     if mode == "router":
         conf.insert_json5("listen/endpoints", json.dumps([endpoint]))
     else:
@@ -80,7 +95,7 @@ def free_tcp_port() -> int:
 
 def open_session(cfg: TransportConfig, mode: str = "client") -> zenoh.Session:
     """Open a session; use as ``with open_session(cfg) as s:``."""
-    return zenoh.open(session_config(cfg.router, mode))
+    return zenoh.open(session_config(cfg.router, mode, cfg.max_message_bytes))
 
 
 def data_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
