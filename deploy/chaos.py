@@ -18,6 +18,7 @@ import hashlib
 import io
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -52,7 +53,7 @@ def logged_env_steps(run_dir: Path) -> tuple[int, int]:
     return 0, 0
 
 
-@dataclass
+@dataclass(eq=False)  # a Thread must stay hashable
 class FaultInjector(threading.Thread):
     """Sends ``sig`` to ``component``'s process once the run has made ``at_steps`` env steps and
     ``ready()`` holds; then measures recovery: seconds until env steps (and updates) move again."""
@@ -66,7 +67,7 @@ class FaultInjector(threading.Thread):
     killed_pid: int | None = None
     killed_at: float | None = None
     recovery_s: float | None = None
-    _stop: threading.Event = field(default_factory=threading.Event)
+    _halt: threading.Event = field(default_factory=threading.Event)
 
     def __post_init__(self) -> None:
         threading.Thread.__init__(self, daemon=True, name=f"inject-{self.component}")
@@ -74,7 +75,7 @@ class FaultInjector(threading.Thread):
     def run(self) -> None:
         deadline = time.monotonic() + self.timeout_s
         pid_file = self.run_dir / "logs" / f"{self.component}.pid"
-        while time.monotonic() < deadline and not self._stop.is_set():
+        while time.monotonic() < deadline and not self._halt.is_set():
             if pid_file.exists() and logged_env_steps(self.run_dir)[0] >= self.at_steps and self.ready():
                 before = logged_env_steps(self.run_dir)
                 pid = int(pid_file.read_text())
@@ -87,7 +88,7 @@ class FaultInjector(threading.Thread):
     def _measure_recovery(self, before: tuple[int, int], deadline: float) -> None:
         # Progress after the fault: both counters past where they stood when it struck, so a
         # learner that died shows recovery only once it updates again (actors may go on meanwhile).
-        while time.monotonic() < deadline and not self._stop.is_set():
+        while time.monotonic() < deadline and not self._halt.is_set():
             steps, updates = logged_env_steps(self.run_dir)
             if steps > before[0] and updates > before[1]:
                 self.recovery_s = round(time.monotonic() - self.killed_at, 1)
@@ -95,7 +96,7 @@ class FaultInjector(threading.Thread):
             time.sleep(0.1)
 
     def stop(self) -> None:
-        self._stop.set()
+        self._halt.set()
 
 
 def _digest(paths: list[str]) -> str:
@@ -135,9 +136,10 @@ FAULTS: dict[str, dict] = {
 def run_fault(name: str, work: Path, env_steps: int, demos: str | None) -> dict:
     spec = FAULTS[name]
     run_dir = work / name / "run"
+    shutil.rmtree(work / name, ignore_errors=True)  # this suite's own scratch: every fault starts fresh
     overrides = {**FAST, "train.run_dir": str(run_dir), "train.env_steps": env_steps, **spec.get("overrides", {})}
     if demos:
-        overrides.update({"replay.demo_mode": "retention", "replay.demo_paths": demos, "replay.capacity": 20_000})
+        overrides.update({"replay.demo_mode": "retention", "replay.demo_paths": demos, "replay.capacity": 9_000})
     cfg = load_run_config(overrides=overrides)
     since: list[float] = []
 
@@ -204,7 +206,9 @@ def chaos_main(args: argparse.Namespace) -> int:
     if args.demos:
         from laneshift.demos.generate import generate_shard
 
-        demos = str(generate_shard(work / "demos", env_id_or_scenario="lka", env_kwargs={}, episodes=6, seed=0))
+        shard = work / "demos"
+        demos = str(shard) if any(shard.glob("**/metadata.json")) else \
+            str(generate_shard(shard, env_id_or_scenario="lka", env_kwargs={}, episodes=6, seed=0))
     rows = []
     for name in names:
         print(f"chaos: {name} ...", file=sys.stderr, flush=True)
@@ -212,8 +216,10 @@ def chaos_main(args: argparse.Namespace) -> int:
         print(f"chaos: {name}: {'survived' if rows[-1].get('survived') else 'FAILED'}, "
               f"recovery {rows[-1].get('recovery_s')} s", file=sys.stderr, flush=True)
     rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
-    print(json.dumps({"revision": rev, "env_steps": args.env_steps, "rows": rows}, indent=2) if args.json
-          else render(rows))
+    result = {"revision": rev, "env_steps": args.env_steps, "rows": rows}
+    if args.out:  # Ray's raylet may print its own lines to stdout: a file holds the JSON alone
+        Path(args.out).write_text(json.dumps(result, indent=2))
+    print(json.dumps(result, indent=2) if args.json else render(rows))
     return 0 if all(r.get("survived") for r in rows) else 1
 
 
@@ -224,4 +230,5 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--work-dir", default="runs/chaos", help="where the runs go (default runs/chaos)")
     p.add_argument("--demos", action="store_true", help="retention with a demo shard, to check its bytes stay identical")
     p.add_argument("--json", action="store_true")
+    p.add_argument("--out", help="also write the JSON result to this file")
     p.set_defaults(func=chaos_main)

@@ -14,66 +14,24 @@ import os
 import signal
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
 import pytest
 
 from laneshift.config import load_run_config
+from laneshift.deploy.chaos import FAST, FaultInjector
 from laneshift.deploy.local import train_local
-
-FAST = {"env.scenario": "lka", "actor.workers": 2, "actor.send_every": 50, "actor.epsilon_decay_steps": 1000,
-        "learner.hidden": "64,64", "learner.batch_size": 64, "learner.publish_every": 10,
-        "learner.checkpoint_every": 100, "learner.checkpoint_every_s": 1.0, "replay.samples_per_insert": 8,
-        "replay.spi_tolerance": 1024, "replay.min_size": 200, "train.eval_episodes": 0, "train.log_every_s": 0.5}
-
-
-def _env_steps(run_dir: Path) -> int:
-    """The newest env-step count the learner logged (0 before the first log line)."""
-    path = run_dir / "metrics.jsonl"
-    try:
-        lines = path.read_text().splitlines()
-    except OSError:
-        return 0
-    for line in reversed(lines):
-        try:
-            rec = json.loads(line)
-        except json.JSONDecodeError:
-            continue
-        if rec.get("kind") == "learner" and "env_steps" in rec:
-            return int(rec["env_steps"])
-    return 0
-
-
-class Killer(threading.Thread):
-    """Kills ``component``'s process with SIGKILL once the run has made ``at_steps`` env steps."""
-
-    def __init__(self, run_dir: Path, component: str, at_steps: int, extra=lambda: True, timeout_s: float = 150):
-        super().__init__(daemon=True)
-        self.run_dir, self.component, self.at_steps, self.extra = run_dir, component, at_steps, extra
-        self.timeout_s = timeout_s
-        self.killed_pid: int | None = None
-
-    def run(self) -> None:
-        deadline = time.monotonic() + self.timeout_s
-        pid_file = self.run_dir / "logs" / f"{self.component}.pid"
-        while time.monotonic() < deadline:
-            if pid_file.exists() and _env_steps(self.run_dir) >= self.at_steps and self.extra():
-                pid = int(pid_file.read_text())
-                os.kill(pid, signal.SIGKILL)
-                self.killed_pid = pid
-                return
-            time.sleep(0.05)
 
 
 def run_with_fault(tmp_path: Path, component: str, at_steps: int, total: int = 6000, extra=lambda: True, **overrides):
     run_dir = tmp_path / "run"
     cfg = load_run_config(overrides={**FAST, "train.run_dir": str(run_dir), "train.env_steps": total, **overrides})
-    killer = Killer(run_dir, component, at_steps, extra)
+    killer = FaultInjector(run_dir, component, at_steps, ready=extra)
     killer.start()
     out = io.StringIO()
     rc = train_local(cfg, out=out)
+    killer.stop()
     killer.join(1)
     text = out.getvalue()
     assert killer.killed_pid, f"{component} was never killed:\n{text}"
