@@ -232,3 +232,35 @@ def test_two_host_train_job_submit(tmp_path, netns_ok):
         plain = re.sub(r"\x1b\[[0-9;]*m", "", status.stdout + status.stderr)  # the CLI colours its output
         assert r.returncode == 0 and f"Job '{job_id}' succeeded" in plain, detail
         _check_run(h, run_dir)
+
+
+def test_two_host_ray_job_stop_ends_the_run_gracefully(tmp_path, netns_ok):
+    """`ray job stop` sends SIGTERM to the driver: checkpoints, a summary that says why, rc 143.
+    Ray SIGKILLs a job RAY_JOB_STOP_WAIT_TIME_S (3 by default) after the SIGTERM; the job's
+    runtime env gives it 30 s, as docs/deploy.md says to."""
+    missing = _has_jobs_cli()
+    if missing:
+        pytest.skip(missing)
+    with twohost.two_hosts(tmp_path, dashboard=True) as h:
+        run_dir = tmp_path / "run"
+        job_id = f"laneshift-stop-{int(time.time())}"
+        ray_cli = str(twohost.RAY)
+        argv = [a if a != str(ENV_STEPS) else "10000000" for a in _train_argv("auto", run_dir)]
+        r = h.run_in_a([ray_cli, "job", "submit", "--address", h.dashboard_url, "--submission-id", job_id,
+                        "--no-wait", "--runtime-env-json", '{"env_vars": {"RAY_JOB_STOP_WAIT_TIME_S": "30"}}',
+                        "--", *argv], timeout=120)
+        assert r.returncode == 0, _show(r, "ray job submit --no-wait")
+        deadline = time.monotonic() + 180
+        metrics = run_dir / "metrics.jsonl"
+        while time.monotonic() < deadline and not (metrics.exists() and '"env_steps": ' in metrics.read_text()
+                                                   and (run_dir / "checkpoints" / "learner_state.pt").exists()):
+            time.sleep(1)
+        stop = h.run_in_a([ray_cli, "job", "stop", "--address", h.dashboard_url, job_id], timeout=120)
+        status = h.run_in_a([ray_cli, "job", "status", "--address", h.dashboard_url, job_id], timeout=60)
+        detail = _show(stop, "ray job stop") + "\n" + _show(status, "ray job status", 2000)
+        summary = json.loads((run_dir / "summary.json").read_text()) if (run_dir / "summary.json").exists() else {}
+        assert summary.get("ended_by") == "SIGTERM", detail + f"\nsummary: {str(summary)[:500]}"
+        assert (run_dir / "replay_checkpoint" / "meta.json").exists() and (run_dir / "checkpoints" / "final.safetensors").exists()
+        assert 0 < summary["env_steps"] and summary["replay"]["inserted"] + summary["replay"]["lost_items"] == summary["env_steps"]
+        print(f"ray job stop: summary ended_by {summary['ended_by']}, {summary['env_steps']} env steps, "
+              f"{summary['replay']['inserted']} stored, {summary['replay']['lost_items']} lost")
