@@ -21,6 +21,8 @@ import pytest
 
 from laneshift.config import load_run_config
 from laneshift.deploy.chaos import FAST, FaultInjector
+from laneshift.deploy.chaos import alive as _alive
+from laneshift.deploy.chaos import descendants as _descendants
 from laneshift.deploy.local import train_local
 
 
@@ -134,30 +136,6 @@ def _wait_training(proc: subprocess.Popen, timeout_s: float = 120) -> list[str]:
         if " upd " in line and "steps       0/" not in line:
             return lines
     pytest.fail("training never started:\n" + "".join(lines))
-
-
-def _descendants(pid: int) -> set[int]:
-    out = subprocess.run(["ps", "-e", "-o", "pid=,ppid="], capture_output=True, text=True).stdout
-    children: dict[int, list[int]] = {}
-    for row in out.split("\n"):
-        if row.strip():
-            p, pp = map(int, row.split())
-            children.setdefault(pp, []).append(p)
-    found, todo = set(), [pid]
-    while todo:
-        for c in children.get(todo.pop(), []):
-            if c not in found:
-                found.add(c)
-                todo.append(c)
-    return found
-
-
-def _alive(pid: int) -> bool:
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except OSError:
-        return False
-    return state != "Z"
 
 
 def test_sigterm_ends_gracefully_and_resume_finishes_the_budget(tmp_path):

@@ -58,13 +58,7 @@ netfaults = _load("netfaults")
 
 LANESHIFT = twohost.BIN / "laneshift"
 
-# As in tests/test_two_host.py: small and fast, learning and weight broadcasts start early.
-FAST = ["actor.send_every=50", "actor.epsilon_decay_steps=1000", "learner.hidden=64,64", "learner.batch_size=64",
-        "learner.publish_every=10", "learner.checkpoint_every=100", "replay.min_size=200",
-        "replay.samples_per_insert=8", "replay.spi_tolerance=1024", "train.log_every_s=1"]
-PLACE = ['deploy.worker_resources={"laneshift_env": 1}', 'deploy.replay_resources={"laneshift_head": 1}',
-         'deploy.learner_resources={"laneshift_head": 1}', 'deploy.router_resources={"laneshift_head": 1}',
-         "train.eval_episodes=0"]
+FAST, PLACE = twohost.FAST, twohost.PLACE  # the two-host run settings, shared with tests/test_two_host.py
 
 # The whole budget. Large, because the workers run far ahead of what is stored (measured: 12,000
 # steps made in 3.5 s while 2,000 were stored; nothing bounds the data in flight) and, once zenoh's

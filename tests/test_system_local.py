@@ -20,6 +20,8 @@ import pytest
 from laneshift import transport, wire
 from laneshift.actors.worker import expand_version_runs
 from laneshift.config import load_run_config
+from laneshift.deploy.chaos import alive as _alive
+from laneshift.deploy.chaos import descendants as _descendants
 from laneshift.deploy.local import train_local
 from laneshift.deploy.processes import ProcessGroup, wait_for_file
 from laneshift.learner.weights import load_checkpoint, tensors_digest
@@ -156,32 +158,6 @@ def test_malformed_messages_are_counted_and_dropped(replay_server_process):
     assert stats["rejected"] == {"bad_magic": 1, "truncated": 1, "bad_shape": 1, "non_finite": 1}
     assert stats["tables"]["online"]["size"] == 5
     group.check_alive()  # the server kept running
-
-
-def _descendants(pid: int) -> set[int]:
-    children: dict[int, list[int]] = {}
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
-            except (OSError, IndexError, ValueError):
-                continue
-            children.setdefault(ppid, []).append(int(entry.name))
-    found, todo = set(), [pid]
-    while todo:
-        for child in children.get(todo.pop(), []):
-            if child not in found:
-                found.add(child)
-                todo.append(child)
-    return found
-
-
-def _alive(pid: int) -> bool:
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except OSError:
-        return False
-    return state != "Z"
 
 
 def test_sigint_leaves_no_process_behind(tmp_path):

@@ -35,14 +35,8 @@ pytestmark = pytest.mark.twohost
 
 LANESHIFT = twohost.BIN / "laneshift"
 ENV_STEPS = 2000
-# Small and fast, as in test_system_local's FAST: learning and weight broadcasts start early
-# enough that weights reach the workers within a 2,000-step run.
-FAST = ["actor.send_every=50", "actor.epsilon_decay_steps=1000", "learner.hidden=64,64", "learner.batch_size=64",
-        "learner.publish_every=10", "learner.checkpoint_every=100", "replay.min_size=200",
-        "replay.samples_per_insert=8", "replay.spi_tolerance=1024", "train.log_every_s=1"]
-PLACE = ['deploy.worker_resources={"laneshift_env": 1}', 'deploy.replay_resources={"laneshift_head": 1}',
-         'deploy.learner_resources={"laneshift_head": 1}', 'deploy.router_resources={"laneshift_head": 1}',
-         "train.eval_episodes=0"]
+# Small and fast run settings and the placement on the two hosts: shared with the network-fault tests.
+FAST, PLACE = twohost.FAST, twohost.PLACE
 
 
 @pytest.fixture

@@ -429,3 +429,14 @@ def _is_alive(pid: int) -> bool:
 
 def _ns_exists(ns: str) -> bool:
     return ns in _ip("netns", "list", check=False).stdout.split()
+
+
+# Run settings of the two-host training tests (test_two_host, test_network_faults): small and
+# fast, so learning and weight broadcasts start early, and the placement: router, replay server
+# and learner on host A (laneshift_head), env workers on host B (laneshift_env).
+FAST = ["actor.send_every=50", "actor.epsilon_decay_steps=1000", "learner.hidden=64,64", "learner.batch_size=64",
+        "learner.publish_every=10", "learner.checkpoint_every=100", "replay.min_size=200",
+        "replay.samples_per_insert=8", "replay.spi_tolerance=1024", "train.log_every_s=1"]
+PLACE = ['deploy.worker_resources={"laneshift_env": 1}', 'deploy.replay_resources={"laneshift_head": 1}',
+         'deploy.learner_resources={"laneshift_head": 1}', 'deploy.router_resources={"laneshift_head": 1}',
+         "train.eval_episodes=0"]
