@@ -410,7 +410,8 @@ class Run:
     # -- supervise
 
     def supervise(self) -> str:
-        """Until every worker is done; returns why it ended: ``done``, ``stopped`` or a signal name."""
+        """Until every worker is done; returns why it ended: ``done`` or a signal's name. (When the
+        learner ends the run itself, train.stop_return, its stop message ends the workers too.)"""
         import ray
 
         d = self.cfg.deploy
@@ -425,9 +426,6 @@ class Run:
             for ref in ready:
                 name = next(n for n, r in self.refs.items() if r == ref)
                 self._collect(name, ref)
-            if "learner" in self.refs and self.learner_final is not None:
-                # The learner ended the run itself (train.stop_return): workers stop via the stop message.
-                pass
             status = self._learner_status()
             if status:
                 self.progress.last = status
