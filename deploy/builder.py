@@ -75,7 +75,7 @@ class Builder:
     def router(self, listen: str):
         from .router import Router
 
-        return Router(listen, self.cfg.transport.max_message_bytes)
+        return Router(listen, self.cfg.max_message_bytes)
 
     def replay_core(self):
         """The replay tables and rules alone (the in-process mode drives it directly)."""

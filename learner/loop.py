@@ -359,7 +359,7 @@ def run_learner(cfg: RunConfig) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     spec = env_spec(cfg.env)
-    with transport.open_session(cfg.transport) as session:
+    with transport.open_session(cfg.transport, max_message_bytes=cfg.max_message_bytes) as session:
         links = ZenohLearnerLinks(session, cfg, spec.schema, stop)
         Learner(cfg, spec, links, stop).run()
     return 0

@@ -184,8 +184,8 @@ class ReplayServer:
             print(f"replay-server: restored {self.restored} items from {self.checkpoint_dir}", flush=True)
         transport.use_service_runtime()
         mode = "router" if self.embedded_router else "client"
-        session = transport.open_session(cfg.transport, mode=mode)
-        ingest_session = transport.open_session(cfg.transport, mode="client")
+        session = transport.open_session(cfg.transport, mode, cfg.max_message_bytes)
+        ingest_session = transport.open_session(cfg.transport, "client", cfg.max_message_bytes)
         self._sessions = [ingest_session, session]
         self.service = ReplayService(core, session, cfg.transport.run_id, self.checkpoint_dir,
                                      cfg.replay.checkpoint_every_s, ingest_session).start()

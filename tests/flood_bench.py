@@ -15,7 +15,7 @@ run = f"/tmp/flood-{int(limit_mb)}"; os.makedirs(run, exist_ok=True)
 cfg = load_run_config(overrides={"env.scenario": "lka", "transport.router": ep, "train.run_dir": run, "transport.max_message_mb": limit_mb})
 save_run_config(cfg, f"{run}/config.yaml")
 py = sys.executable
-router = subprocess.Popen([py, "-c", f"from laneshift.deploy.router import Router; import time; r = Router('{ep}', {cfg.transport.max_message_bytes}).start(); time.sleep(600)"])
+router = subprocess.Popen([py, "-c", f"from laneshift.deploy.router import Router; import time; r = Router('{ep}', {cfg.max_message_bytes}).start(); time.sleep(600)"])
 replay = subprocess.Popen([py, "-m", "laneshift", "replay-server", "--config", f"{run}/config.yaml", "--ready-file", f"{run}/ready"], stdout=open(f"{run}/replay.log", "w"), stderr=subprocess.STDOUT)
 for _ in range(600):
     if os.path.exists(f"{run}/ready"): break

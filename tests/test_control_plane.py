@@ -220,3 +220,13 @@ def test_a_second_replay_server_on_the_same_run_dir_is_refused(tmp_path):
     first.close()
     second._lock_checkpoint_dir()  # free again once the first one is gone
     second.close()
+
+
+def test_zenoh_message_limit_is_sized_from_the_run():
+    vector = load_run_config()
+    assert vector.max_message_bytes == 16 * 2**20  # floor: a vector sample reply is ~8 MiB
+    gray = load_run_config(overrides={"env.observation": "grayscale"})
+    assert gray.max_message_bytes == 2 * gray.largest_message_bytes > 256 * 2**20  # 4x100x100 frames
+    assert load_run_config(overrides={"transport.max_message_mb": 64}).max_message_bytes == 64 * 2**20
+    with pytest.raises(ConfigError, match="transport.max_message_mb"):
+        load_run_config(overrides={"env.observation": "grayscale", "transport.max_message_mb": 8})

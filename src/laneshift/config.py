@@ -260,16 +260,9 @@ class TransportConfig:
     run_id: str = "run"  # namespace in every key expression: laneshift/<run_id>/...
     timeout_s: float = 5.0  # query timeout
     # zenoh drops a received message larger than this before buffering it (hostile or broken
-    # senders cannot balloon the router's or the replay server's memory). 0 = sized from the run:
-    # twice its largest message (a sample reply), at least 16 MiB.
+    # senders cannot balloon the router's or the replay server's memory). 0 = sized from the run
+    # (RunConfig.max_message_bytes): twice its largest message (a sample reply), at least 16 MiB.
     max_message_mb: float = 0.0
-    largest_message_bytes: int = 0  # set by RunConfig from the run's settings; not a user setting
-
-    @property
-    def max_message_bytes(self) -> int:
-        if self.max_message_mb:
-            return int(self.max_message_mb * 2**20)
-        return max(16 * 2**20, 2 * self.largest_message_bytes)
 
     def __post_init__(self) -> None:
         _check(self.router.startswith(("tcp/", "udp/", "unixsock-stream/")), "transport.router",
@@ -370,13 +363,8 @@ class RunConfig:
     deploy: DeployConfig = field(default_factory=DeployConfig)
 
     def __post_init__(self) -> None:
-        # The run's largest message is a sample reply (two observations a row); grayscale frames
-        # are 4 x 100 x 100 bytes, vector observations at most a few hundred floats.
-        obs_bytes = 4 * 100 * 100 if self.env.observation == "grayscale" else 4 * 512
-        largest = self.learner.batch_size * max(self.learner.prefetch, self.learner.updates_per_round) * (2 * obs_bytes + 64)
-        if self.transport.largest_message_bytes != largest:
-            object.__setattr__(self, "transport", dataclasses.replace(self.transport, largest_message_bytes=largest))
-        if self.transport.max_message_mb and self.transport.max_message_bytes < largest:
+        largest = self.largest_message_bytes
+        if self.transport.max_message_mb and self.transport.max_message_mb * 2**20 < largest:
             raise ConfigError(f"transport.max_message_mb: a sample reply of this run takes up to "
                               f"{largest / 2**20:.1f} MiB, so the limit must be above that, "
                               f"got {self.transport.max_message_mb!r}")
@@ -389,6 +377,21 @@ class RunConfig:
             # A sync round needs a batch from every worker; its first n - 1 steps complete no item.
             raise ConfigError(f"learner.n_step: must be <= actor.send_every ({self.actor.send_every}) in sync mode, "
                               f"or a worker's first round would have nothing to send, got {self.learner.n_step!r}")
+
+    @property
+    def largest_message_bytes(self) -> int:
+        """The run's largest message: a sample reply (two observations a row). Grayscale frames
+        are 4 x 100 x 100 bytes; vector observations at most a few hundred floats."""
+        obs_bytes = 4 * 100 * 100 if self.env.observation == "grayscale" else 4 * 512
+        rows = self.learner.batch_size * max(self.learner.prefetch, self.learner.updates_per_round)
+        return rows * (2 * obs_bytes + 64)
+
+    @property
+    def max_message_bytes(self) -> int:
+        """zenoh's receive limit for every session of this run (``transport.max_message_mb``)."""
+        if self.transport.max_message_mb:
+            return int(self.transport.max_message_mb * 2**20)
+        return max(16 * 2**20, 2 * self.largest_message_bytes)
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
         return {f.name: _plain(dataclasses.asdict(getattr(self, f.name))) for f in dataclasses.fields(self)}

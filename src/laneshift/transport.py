@@ -93,9 +93,12 @@ def free_tcp_port() -> int:
         return s.getsockname()[1]
 
 
-def open_session(cfg: TransportConfig, mode: str = "client") -> zenoh.Session:
-    """Open a session; use as ``with open_session(cfg) as s:``."""
-    return zenoh.open(session_config(cfg.router, mode, cfg.max_message_bytes))
+def open_session(cfg: TransportConfig, mode: str = "client", max_message_bytes: int | None = None) -> zenoh.Session:
+    """Open a session; use as ``with open_session(cfg) as s:``. ``max_message_bytes``: the run's
+    (``RunConfig.max_message_bytes``); else ``transport.max_message_mb``, else the default."""
+    if max_message_bytes is None:
+        max_message_bytes = int(cfg.max_message_mb * 2**20) if cfg.max_message_mb else DEFAULT_MAX_MESSAGE_BYTES
+    return zenoh.open(session_config(cfg.router, mode, max_message_bytes))
 
 
 def data_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
