@@ -4,7 +4,8 @@
 * ``test_two_host_ray_cluster_forms``: the harness itself (always runnable where root and ``ip
   netns`` are): a task asking for ``laneshift_env`` runs on host B, the cluster refuses a wrong
   token, host B has no route but the link to host A, nothing is left behind.
-* ``test_two_host_train_cluster``: ``laneshift train --cluster 10.213.7.1:<port>`` run in host A;
+* ``test_two_host_train_cluster``: ``laneshift train --cluster 10.213.7.1:<port>`` (and through Ray
+  Client, ``ray://10.213.7.1:<client port>``) run in host A;
   env workers must run on host B, the router, replay server and learner on host A.
 * ``test_two_host_train_job_submit``: the same run submitted as a Ray job through the dashboard's
   jobs API (``ray job submit``; needs ``ray[default]``), the driver using ``--cluster auto``.
@@ -188,12 +189,15 @@ def _check_run(h, run_dir: Path) -> None:
           f"{ {n: w['weight_updates'] for n, w in workers.items()} }")
 
 
-def test_two_host_train_cluster(tmp_path, netns_ok):
+@pytest.mark.parametrize("via", ["gcs", "ray-client"])
+def test_two_host_train_cluster(tmp_path, netns_ok, via):
+    """``--cluster HOST:PORT`` (a driver on the head) and ``--cluster ray://HOST:10001`` (Ray Client)."""
     with twohost.two_hosts(tmp_path) as h:
         run_dir = tmp_path / "run"
+        address = h.ray_address if via == "gcs" else f"ray://{twohost.HOST_A}:{twohost.RAY_CLIENT_PORT}"
         started = time.monotonic()
-        r = h.run_in_a(_train_argv(h.ray_address, run_dir), timeout=300)
-        print(f"laneshift train --cluster {h.ray_address}: rc {r.returncode} in {time.monotonic() - started:.0f} s")
+        r = h.run_in_a(_train_argv(address, run_dir), timeout=300)
+        print(f"laneshift train --cluster {address}: rc {r.returncode} in {time.monotonic() - started:.0f} s")
         assert r.returncode == 0, _show(r, "laneshift train --cluster") + f"\n(logs: {h.logs}, {run_dir / 'logs'})"
         _check_run(h, run_dir)
 
