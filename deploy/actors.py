@@ -49,8 +49,32 @@ def _log_to_run_dir(cfg: RunConfig, component: str) -> None:
     os.dup2(fd, 1)
     os.dup2(fd, 2)
     os.close(fd)
-    sys.stdout = os.fdopen(1, "w", buffering=1, closefd=False)
-    sys.stderr = os.fdopen(2, "w", buffering=1, closefd=False)
+    sys.stdout = _LogStream(os.fdopen(1, "w", buffering=1, closefd=False))
+    sys.stderr = _LogStream(os.fdopen(2, "w", buffering=1, closefd=False))
+
+
+class _LogStream:
+    """A log stream whose writes never raise: on a full disk a component's print() raised
+    OSError (ENOSPC) and took the component down; now the line is lost and counted."""
+
+    def __init__(self, stream):
+        self._stream, self.failures = stream, 0
+
+    def write(self, text: str) -> int:
+        try:
+            return self._stream.write(text)
+        except OSError:
+            self.failures += 1
+            return len(text)
+
+    def flush(self) -> None:
+        try:
+            self._stream.flush()
+        except OSError:
+            self.failures += 1
+
+    def __getattr__(self, name: str):
+        return getattr(self._stream, name)
 
 
 def _write_pid(cfg: RunConfig, component: str) -> None:

@@ -158,6 +158,8 @@ FAULTS: dict[str, dict] = {
     "replay": {"component": "replay-server", "overrides": {"replay.checkpoint_every_s": 0}},
     "replay-after-checkpoint": {"component": "replay-server", "needs": "replay_checkpoint",
                                 "overrides": {"replay.checkpoint_every_s": 0.5}},
+    # The run dir on a 6 MiB tmpfs that fills up: checkpoints fail (counted, retried), training goes on.
+    "disk-full": {"disk_mb": 6, "overrides": {"replay.checkpoint_every_s": 2, "replay.capacity": 60_000}},
 }
 
 
@@ -165,6 +167,8 @@ def run_fault(name: str, work: Path, env_steps: int, demos: str | None) -> dict:
     spec = FAULTS[name]
     run_dir = work / name / "run"
     shutil.rmtree(work / name, ignore_errors=True)  # this suite's own scratch: every fault starts fresh
+    if spec.get("disk_mb"):
+        return _disk_full(name, spec, work / name, env_steps)
     overrides = {**FAST, "train.run_dir": str(run_dir), "train.env_steps": env_steps, **spec.get("overrides", {})}
     if demos:
         overrides.update({"replay.demo_mode": "retention", "replay.demo_paths": demos, "replay.capacity": 9_000})
@@ -209,6 +213,38 @@ def run_fault(name: str, work: Path, env_steps: int, demos: str | None) -> dict:
                 "demo_identical": (_digest([demos]) == demo_before) if demos else None,
                 "left_behind": len(_ray_processes(run_dir))})
     return row
+
+
+def _disk_full(name: str, spec: dict, where: Path, env_steps: int) -> dict:
+    """A whole run whose run dir is a small tmpfs (root and mount needed; else the row says why)."""
+    where.mkdir(parents=True)
+    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={spec['disk_mb']}m", "tmpfs", str(where)],
+                             capture_output=True, text=True)
+    if mounted.returncode != 0:
+        return {"fault": name, "survived": None, "skipped": f"cannot mount a tmpfs: {mounted.stderr.strip()}"}
+    try:
+        run_dir = where / "run"
+        cfg = load_run_config(overrides={**FAST, "train.run_dir": str(run_dir), "train.env_steps": env_steps,
+                                         **spec.get("overrides", {})})
+        from .local import train_local
+
+        out = io.StringIO()
+        started = time.monotonic()
+        rc = train_local(cfg, out=out)
+        summary = json.loads((run_dir / "summary.json").read_text())
+        replay = json.loads((run_dir / "replay_stats.json").read_text())
+        made = sum(w["env_steps"] for w in summary["workers"])
+        stored, lost = int(replay["tables"]["online"]["inserted"]), int(summary["replay"]["lost_items"])
+        failures = {"replay_checkpoint": (replay.get("checkpoint") or {}).get("failures", 0),
+                    "learner": summary["learner"].get("checkpoint_failures", 0)}
+        time.sleep(2)
+        return {"fault": name, "rc": rc, "wall_s": round(time.monotonic() - started, 1), "injected": True,
+                "recovery_s": 0.0, "survived": rc == 0 and made == env_steps and sum(failures.values()) > 0,
+                "made": made, "stored": stored, "lost_counted": lost, "unaccounted": made - stored - lost,
+                "versions_monotonic": True, "demo_identical": None, "left_behind": len(_ray_processes(run_dir)),
+                "write_failures_counted": failures, "restarts": summary.get("restarts", {})}
+    finally:
+        subprocess.run(["umount", "-l", str(where)], check=False)
 
 
 def render(rows: list[dict]) -> str:
