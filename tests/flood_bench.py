@@ -31,4 +31,14 @@ for i in range(4):
     pub.put(blob); print("sent", i, file=sys.stderr, flush=True)
 time.sleep(8)
 print(json.dumps({"limit_mb": limit_mb, "router_peak_mb": peak(router.pid), "replay_peak_mb": peak(replay.pid)}))
-s.close(); router.kill(); replay.terminate(); replay.wait(20); router.wait()
+s.close()
+# The replay server first, while its router still runs (its graceful stop closes zenoh sessions,
+# which waited forever once the router was gone and left it behind), then the router.
+replay.terminate()
+try:
+    replay.wait(20)
+except subprocess.TimeoutExpired:
+    replay.kill()
+    replay.wait()
+router.kill()
+router.wait()
