@@ -44,14 +44,20 @@ class ZenohActorLinks:
         self._transitions.put(payload)
         self._sent += 1
 
-    def _stored_next_seq(self) -> int | None:
+    def stored_state(self) -> dict[str, int] | None:
+        """What the replay server stored of this worker: ``{"env_steps", "next_seq"}`` (zeros for
+        a worker it never saw), or None when it did not answer. A restarted worker resumes there."""
         reply = transport.query(self.session, wire.replay_control_key(self.run_id),
                                 wire.encode_json({"cmd": "actor_state", "actor": self.name}), self.timeout_s)
         try:
             body = wire.decode_json(reply) if reply is not None else {}
         except wire.WireError:
             return None
-        return int(body["next_seq"]) if body.get("ok") else None
+        return {"env_steps": int(body["env_steps"]), "next_seq": int(body["next_seq"])} if body.get("ok") else None
+
+    def _stored_next_seq(self) -> int | None:
+        state = self.stored_state()
+        return state["next_seq"] if state is not None else None
 
     def _bound_in_flight(self) -> None:
         """Wait while more than MAX_IN_FLIGHT of this worker's batches are sent but not stored.

@@ -232,20 +232,11 @@ class EnvWorkerActor:
 
     def _resume_point(self) -> dict[str, int]:
         """Ask the replay server what it stored of this worker (a first start gets zeros)."""
-        from laneshift import transport, wire
-
-        key = wire.replay_control_key(self.cfg.transport.run_id)
-        body = wire.encode_json({"cmd": "actor_state", "actor": self.name})
         deadline = time.monotonic() + self.cfg.deploy.start_timeout_s
         while time.monotonic() < deadline:
-            reply = transport.query(self.session, key, body, self.cfg.transport.timeout_s)
-            if reply is not None:
-                try:
-                    state = wire.decode_json(reply)
-                except wire.WireError:
-                    state = {}
-                if state.get("ok"):
-                    return {"env_steps": int(state["env_steps"]), "next_seq": int(state["next_seq"])}
+            state = self.links.stored_state()
+            if state is not None:
+                return state
             time.sleep(0.2)
         raise TimeoutError(f"{self.name}: the replay server did not answer within "
                            f"{self.cfg.deploy.start_timeout_s:.0f} s (router {self.cfg.transport.router})")
