@@ -32,3 +32,28 @@ bench: $(STAMP)
 
 clean:
 	rm -rf $(VENV) build *.egg-info
+
+# The RLlib peer of the comparison (docs/rllib-peer.md): RLlib 2.60's DQN on the same env, in its own
+# venv because ray[rllib] pins gymnasium 1.2.2 and laneshift pins 1.4.0. Only laneshift's env code
+# is imported there. make bench-rllib RLLIB_ARGS="--env-steps 3000 --ratio 8"
+RLLIB_VENV ?= .venv-rllib
+RLLIB_PY := $(RLLIB_VENV)/bin/python
+RLLIB_STAMP := $(RLLIB_VENV)/.installed-stamp
+RLLIB_ARGS ?=
+
+.PHONY: bench-rllib
+
+$(RLLIB_STAMP): pyproject.toml
+	$(PYTHON) -m venv $(RLLIB_VENV)
+	# Exactly torch 2.13.0 first (CPU wheel on disk), then RLlib with torch pinned in the same resolve.
+	$(RLLIB_PY) -m pip install --disable-pip-version-check -q torch==2.13.0
+	$(RLLIB_PY) -m pip install --disable-pip-version-check -q "ray[rllib]==2.60.0" torch==2.13.0
+	# The env's own deps under RLlib's gymnasium 1.2.2 (highway-env accepts >=1.0; it brings pygame-ce),
+	# then laneshift itself without its deps (no zenoh, no gymnasium 1.4.0).
+	$(RLLIB_PY) -m pip install --disable-pip-version-check -q highway-env==1.12.1 gymnasium==1.2.2 torch==2.13.0
+	$(RLLIB_PY) -m pip install --disable-pip-version-check -q --no-deps -e .
+	@if $(RLLIB_PY) -m pip list 2>/dev/null | grep -i nvidia; then echo "error: CUDA packages were installed"; exit 1; fi
+	@touch $(RLLIB_STAMP)
+
+bench-rllib: $(RLLIB_STAMP)
+	@$(RLLIB_PY) benchmarks/rllib_dqn.py $(RLLIB_ARGS)

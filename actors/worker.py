@@ -24,12 +24,10 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
-import torch
 
 from laneshift import wire
 from laneshift.config import ActorConfig, EnvConfig
 from laneshift.envspec import make_env
-from laneshift.learner.weights import tensors_digest
 from laneshift.nstep import NStepAccumulator, NStepItem, check_nstep
 
 from .exploration import make_schedule
@@ -94,7 +92,6 @@ class EnvWorker:
     def __init__(self, name: str, index: int, env_cfg: EnvConfig, actor_cfg: ActorConfig,
                  hidden: tuple[int, ...], sync: bool, rehearsal: bool, n_step: int = 1, gamma: float = 0.99,
                  dueling: bool = False):
-        torch.set_num_threads(actor_cfg.torch_threads)
         self.name, self.index, self.cfg = name, index, actor_cfg
         self.sync, self.rehearsal = sync, rehearsal
         self.envs = [make_env(env_cfg) for _ in range(actor_cfg.envs_per_worker)]
@@ -102,7 +99,8 @@ class EnvWorker:
         check_nstep(n_step, gamma)  # a bad n or gamma is refused here, not mid-run
         space = self.envs[0].observation_space
         self.policy = QPolicy(tuple(space.shape), int(self.envs[0].action_space.n), hidden,
-                              seed=actor_cfg.seed + 7919 * index, dueling=dueling)
+                              seed=actor_cfg.seed + 7919 * index, dueling=dueling,
+                              torch_threads=actor_cfg.torch_threads)
         self.uses_policy_vehicles = env_cfg.policy_vehicles > 0
         self.bad_weights = 0
         self.weight_updates = 0
@@ -119,7 +117,7 @@ class EnvWorker:
                 return False  # an older or repeated version (e.g. a query answer after an update)
             self.policy.load(weights)
             if not self.first_weights_sha256 and (not self.rehearsal or weights.phase == 2):
-                self.first_weights_sha256 = tensors_digest(weights.tensors)
+                self.first_weights_sha256 = wire.tensors_digest(weights.tensors)
         except (wire.WireError, ValueError):
             self.bad_weights += 1  # counted and ignored: keep acting with the weights we have
             return False
@@ -172,7 +170,8 @@ class EnvWorker:
             for _ in range(iters):
                 eps = epsilon(steps)
                 actions = self.policy.act(obs, eps)
-                for j, env in enumerate(self.envs):
+                # The budget's last step may need fewer than all envs: never overrun it.
+                for j, env in enumerate(self.envs[:env_steps - steps]):
                     next_obs, reward, terminated, truncated, info = env.step(int(actions[j]))
                     items += pending[j].push(obs[j].copy(), int(actions[j]), float(reward), next_obs,
                                              bool(terminated), bool(truncated))
@@ -189,7 +188,7 @@ class EnvWorker:
                         ep_return[j], ep_len[j] = 0.0, 0
                         next_obs, _ = env.reset()
                     obs[j] = next_obs
-                steps += n_envs
+                steps += min(n_envs, env_steps - steps)
                 if steps >= env_steps:
                     break
             if steps >= env_steps or links.stop_requested():  # the budget's last items bootstrap from here

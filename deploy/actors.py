@@ -32,7 +32,16 @@ from .builder import Builder
 
 
 def _config(plain: dict) -> RunConfig:
-    return load_run_config(overrides={f"{s}.{k}": v for s, body in plain.items() for k, v in body.items()})
+    """The run config from its plain form, plus the env spec the launcher computed, if it sent one
+    (then this process builds no simulator just to learn the observation's shape)."""
+    plain = dict(plain)
+    spec = plain.pop("env_spec", None)
+    cfg = load_run_config(overrides={f"{s}.{k}": v for s, body in plain.items() for k, v in body.items()})
+    if spec is not None:
+        from laneshift.envspec import remember
+
+        remember(cfg.env, spec)
+    return cfg
 
 
 def _log_to_run_dir(cfg: RunConfig, component: str) -> None:

@@ -6,7 +6,11 @@ counted lost, weights versions monotonic, demo shard bytes identical, processes 
 ``tests/test_faults.py`` runs the same faults (with ``FaultInjector``) as fast tests.
 May import: the contract and ``deploy``.
 
-    laneshift chaos --faults worker,learner,router,replay,replay-after-checkpoint,disk-full --json
+    laneshift chaos --faults worker,learner,router,replay,replay-after-checkpoint --json
+    laneshift chaos --faults disk-full,unwritable,stats-flood,launcher-sigterm,launcher-kill
+
+The network faults (a cut between two hosts, a slow and jittery link) need two network namespaces
+and run as ``pytest -m chaos tests/test_network_faults.py``.
 
 Processes are found through ``<run dir>/logs/<component>.pid`` (each actor writes its own).
 """
@@ -85,6 +89,10 @@ class FaultInjector(threading.Thread):
                 return
             time.sleep(0.05)
 
+    @property
+    def struck(self) -> bool:
+        return self.killed_pid is not None
+
     def _measure_recovery(self, before: tuple[int, int], deadline: float) -> None:
         # Progress after the fault: both counters past where they stood when it struck, so a
         # learner that died shows recovery only once it updates again (actors may go on meanwhile).
@@ -160,6 +168,14 @@ FAULTS: dict[str, dict] = {
                                 "overrides": {"replay.checkpoint_every_s": 0.5}},
     # The run dir on a 6 MiB tmpfs that fills up: checkpoints fail (counted, retried), training goes on.
     "disk-full": {"disk_mb": 6, "overrides": {"replay.checkpoint_every_s": 2, "replay.capacity": 60_000}},
+    # The run dir read-only for 5 s (a bind mount remounted ro: EROFS even for root), then writable again.
+    "unwritable": {"read_only_s": 5.0, "overrides": {"replay.checkpoint_every_s": 1}},
+    # 5,000 actor names, one one-row batch each, from a foreign client, while stats are queried.
+    "stats-flood": {"flood_actors": 5000},
+    # The launcher itself: SIGTERM (`ray job stop`, systemd, Kubernetes) or kill -9, then
+    # `laneshift train --resume RUN_DIR`, which must spend exactly the rest of the budget.
+    "launcher-sigterm": {"launcher_signal": signal.SIGTERM, "overrides": {"replay.checkpoint_every_s": 2}},
+    "launcher-kill": {"launcher_signal": signal.SIGKILL, "overrides": {"replay.checkpoint_every_s": 2}},
 }
 
 
@@ -169,6 +185,8 @@ def run_fault(name: str, work: Path, env_steps: int, demos: str | None) -> dict:
     shutil.rmtree(work / name, ignore_errors=True)  # this suite's own scratch: every fault starts fresh
     if spec.get("disk_mb"):
         return _disk_full(name, spec, work / name, env_steps)
+    if spec.get("launcher_signal"):
+        return _launcher_fault(name, spec, run_dir, env_steps)
     overrides = {**FAST, "train.run_dir": str(run_dir), "train.env_steps": env_steps, **spec.get("overrides", {})}
     if demos:
         overrides.update({"replay.demo_mode": "retention", "replay.demo_paths": demos, "replay.capacity": 9_000})
@@ -186,7 +204,12 @@ def run_fault(name: str, work: Path, env_steps: int, demos: str | None) -> dict:
         return True
 
     demo_before = _digest([demos]) if demos else ""
-    inject = FaultInjector(run_dir, spec["component"], at_steps=env_steps // 4, ready=ready)
+    if spec.get("read_only_s"):
+        inject = ReadOnlyRunDir(run_dir, at_steps=env_steps // 4, seconds=spec["read_only_s"])
+    elif spec.get("flood_actors"):
+        inject = StatsFlood(run_dir, at_steps=env_steps // 4, actors=spec["flood_actors"])
+    else:
+        inject = FaultInjector(run_dir, spec["component"], at_steps=env_steps // 4, ready=ready)
     inject.start()
     from .local import train_local
 
@@ -195,23 +218,235 @@ def run_fault(name: str, work: Path, env_steps: int, demos: str | None) -> dict:
     rc = train_local(cfg, out=out)
     inject.stop()
     row: dict = {"fault": name, "rc": rc, "wall_s": round(time.monotonic() - started, 1),
-                 "injected": inject.killed_pid is not None, "recovery_s": inject.recovery_s}
+                 "injected": inject.struck, "recovery_s": inject.recovery_s}
     try:
         summary = json.loads((run_dir / "summary.json").read_text())
         replay = json.loads((run_dir / "replay_stats.json").read_text())
     except (OSError, json.JSONDecodeError):
         return {**row, "survived": False, "log_tail": out.getvalue()[-2000:]}
-    made = sum(w["env_steps"] for w in summary["workers"])
-    stored = int(replay["tables"]["online"]["inserted"])
-    lost = int(summary["replay"]["lost_items"])
-    monotonic = all([v for v, _ in w["version_runs"]] == sorted(v for v, _ in w["version_runs"])
-                    for w in summary["workers"])
+    made, stored, lost = _accounting(summary, replay)
     time.sleep(2)  # let Ray's processes exit before counting what is left
     row.update({"survived": rc == 0 and made == env_steps, "restarts": summary.get("restarts", {}),
                 "made": made, "stored": stored, "lost_counted": lost, "unaccounted": made - stored - lost,
-                "versions_monotonic": monotonic,
+                "versions_monotonic": _monotonic(summary),
                 "demo_identical": (_digest([demos]) == demo_before) if demos else None,
                 "left_behind": len(_ray_processes(run_dir))})
+    if spec.get("read_only_s"):  # the fault must have struck: writes failed, counted, and training went on
+        row["write_failures_counted"] = failures = _write_failures(summary, replay)
+        row["survived"] = row["survived"] and inject.struck and sum(failures.values()) > 0
+    if spec.get("flood_actors"):
+        row.update(inject.report())
+        row["survived"] = (row["survived"] and inject.struck and not summary.get("restarts")
+                           and inject.stats_answered == inject.stats_asked)
+    return row
+
+
+def _accounting(summary: dict, replay: dict) -> tuple[int, int, int]:
+    """(made, stored, counted lost) of the run's own env workers (a foreign client's items aside)."""
+    names = {w["name"] for w in summary["workers"]}
+    made = sum(w["env_steps"] for w in summary["workers"])
+    actors = replay.get("actors", {})
+    if names <= set(actors):
+        stored = sum(int(actors[n]["stored"]) for n in names)
+        # Counted by the server, plus what a worker sent after the last batch the server saw.
+        lost = sum(int(actors[w["name"]]["lost_items"]) + max(0, w["env_steps"] - int(actors[w["name"]]["env_steps"]))
+                   for w in summary["workers"])
+    else:
+        stored, lost = int(replay["tables"]["online"]["inserted"]), int(summary["replay"]["lost_items"])
+    return made, stored, lost
+
+
+def _monotonic(summary: dict) -> bool:
+    return all([v for v, _ in w["version_runs"]] == sorted(v for v, _ in w["version_runs"]) for w in summary["workers"])
+
+
+def _write_failures(summary: dict, replay: dict) -> dict[str, int]:
+    return {"replay_checkpoint": int((replay.get("checkpoint") or {}).get("failures", 0)),
+            "learner": int(summary["learner"].get("checkpoint_failures", 0))}
+
+
+@dataclass(eq=False)
+class ReadOnlyRunDir(threading.Thread):
+    """Makes the run dir read-only for ``seconds`` once the run made ``at_steps`` env steps: a bind
+    mount of it onto itself, remounted ro (EROFS even for root; files already open keep writing,
+    as on a filesystem remounted read-only under a running job), then unmounted."""
+
+    run_dir: Path
+    at_steps: int
+    seconds: float
+    timeout_s: float = 300.0
+    struck: bool = False
+    recovery_s: float | None = None
+    error: str = ""
+    _halt: threading.Event = field(default_factory=threading.Event)
+
+    def __post_init__(self) -> None:
+        threading.Thread.__init__(self, daemon=True, name="inject-read-only")
+
+    def run(self) -> None:
+        deadline = time.monotonic() + self.timeout_s
+        while time.monotonic() < deadline and not self._halt.is_set():
+            if logged_env_steps(self.run_dir)[0] >= self.at_steps:
+                break
+            time.sleep(0.05)
+        else:
+            return
+        where = str(self.run_dir)
+        bound = subprocess.run(["mount", "--bind", where, where], capture_output=True, text=True)
+        if bound.returncode != 0:
+            self.error = bound.stderr.strip()
+            return
+        try:
+            ro = subprocess.run(["mount", "-o", "remount,bind,ro", where], capture_output=True, text=True)
+            self.struck = ro.returncode == 0
+            self.error = ro.stderr.strip()
+            self._halt.wait(self.seconds)
+        finally:
+            subprocess.run(["umount", "-l", where], check=False)
+        before, back = logged_env_steps(self.run_dir), time.monotonic()
+        while time.monotonic() < deadline and not self._halt.is_set():
+            steps, updates = logged_env_steps(self.run_dir)
+            if steps > before[0] and updates > before[1]:
+                self.recovery_s = round(time.monotonic() - back, 1)
+                return
+            time.sleep(0.1)
+
+    def stop(self) -> None:
+        self._halt.set()
+
+
+@dataclass(eq=False)
+class StatsFlood(threading.Thread):
+    """A foreign zenoh client, once the run made ``at_steps`` env steps: one one-row batch under each
+    of ``actors`` names (more than the replay server keeps state for), then stats queries. The
+    learner, the launcher and every stats reply must come through it."""
+
+    run_dir: Path
+    at_steps: int
+    actors: int
+    timeout_s: float = 300.0
+    struck: bool = False
+    recovery_s: float | None = None
+    stats_asked: int = 0
+    stats_answered: int = 0
+    largest_reply: int = 0
+    _halt: threading.Event = field(default_factory=threading.Event)
+
+    def __post_init__(self) -> None:
+        threading.Thread.__init__(self, daemon=True, name="inject-stats-flood")
+
+    def run(self) -> None:
+        import numpy as np
+
+        from laneshift import transport, wire
+        from laneshift.envspec import env_spec
+
+        deadline = time.monotonic() + self.timeout_s
+        while time.monotonic() < deadline and not self._halt.is_set():
+            if logged_env_steps(self.run_dir)[0] >= self.at_steps:
+                break
+            time.sleep(0.05)
+        else:
+            return
+        cfg = load_run_config(self.run_dir / "config.yaml")  # as the launcher resolved it: the router's endpoint
+        schema = env_spec(cfg.env).schema
+        obs = np.zeros((1, *schema.obs_shape), schema.obs_dtype)
+        before, began = logged_env_steps(self.run_dir), time.monotonic()
+        with transport.open_session(cfg.transport, "client", cfg.max_message_bytes) as session:
+            for i in range(self.actors):
+                name = f"flood{i:05d}"
+                batch = wire.TransitionBatch.from_arrays(
+                    actor=name, seq=0, weights_version=0, phase=0, env_steps=1, obs=obs, action=np.zeros(1),
+                    reward=np.zeros(1), next_obs=obs, terminated=np.zeros(1), truncated=np.zeros(1))
+                session.put(wire.transitions_key(cfg.transport.run_id, name), wire.encode_transitions(batch),
+                            congestion_control=transport.zenoh.CongestionControl.BLOCK)
+            self.struck = True
+            for _ in range(10):
+                self.stats_asked += 1
+                reply = transport.query_ok(session, wire.replay_stats_key(cfg.transport.run_id), b"{}", 10.0)
+                if isinstance(reply, (bytes, bytearray)):
+                    self.stats_answered += 1
+                    self.largest_reply = max(self.largest_reply, len(reply))
+                time.sleep(0.2)
+        while time.monotonic() < deadline and not self._halt.is_set():
+            steps, updates = logged_env_steps(self.run_dir)
+            if steps > before[0] and updates > before[1]:
+                self.recovery_s = round(time.monotonic() - began, 1)
+                return
+            time.sleep(0.1)
+
+    def report(self) -> dict:
+        return {"flood_actors": self.actors, "stats_answered": f"{self.stats_answered}/{self.stats_asked}",
+                "largest_stats_reply_bytes": self.largest_reply}
+
+    def stop(self) -> None:
+        self._halt.set()
+
+
+def _launcher_fault(name: str, spec: dict, run_dir: Path, env_steps: int) -> dict:
+    """The launcher as its own process, signalled at a quarter of the budget; then ``--resume``."""
+    overrides = {**FAST, "train.env_steps": env_steps, **spec.get("overrides", {})}
+    sets = [arg for k, v in overrides.items() for arg in ("--set", f"{k}={v}")]
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    log = run_dir.parent / "launcher.log"
+    run_dir.parent.mkdir(parents=True, exist_ok=True)
+    started = time.monotonic()
+    with log.open("w") as out:
+        proc = subprocess.Popen([sys.executable, "-m", "laneshift", "train", "--local", "--run-dir", str(run_dir), *sets],
+                                stdout=out, stderr=subprocess.STDOUT, env=env)
+        row: dict = {"fault": name, "injected": False, "recovery_s": None}
+        try:
+            deadline = time.monotonic() + 300
+            while time.monotonic() < deadline and proc.poll() is None and logged_env_steps(run_dir)[0] < env_steps // 4:
+                time.sleep(0.05)
+            family = descendants(proc.pid)
+            signalled = time.monotonic()
+            proc.send_signal(spec["launcher_signal"])
+            row["injected"] = True
+            first_rc = proc.wait(120)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and any(alive(p) for p in family):
+        time.sleep(0.2)
+    left_after_fault = [p for p in family if alive(p)]
+    row.update({"first_rc": first_rc, "stopped_s": round(time.monotonic() - signalled, 1),
+                "left_after_fault": len(left_after_fault)})
+    resumed_at = time.monotonic()
+    before = logged_env_steps(run_dir)  # where the stopped run's last record left it (the final one on SIGTERM)
+    with log.open("a") as out:
+        again = subprocess.Popen([sys.executable, "-m", "laneshift", "train", "--local", "--resume", str(run_dir)],
+                                 stdout=out, stderr=subprocess.STDOUT, env=env)
+        try:
+            while again.poll() is None and time.monotonic() - resumed_at < 600:
+                steps, updates = logged_env_steps(run_dir)
+                if row["recovery_s"] is None and updates > before[1]:
+                    # From the resume command until the learner trains past where it stopped (Ray's
+                    # start included). Not env steps: the learner's count of them is rebuilt from
+                    # the workers' episode reports, which take an episode each to arrive.
+                    row["recovery_s"] = round(time.monotonic() - resumed_at, 1)
+                time.sleep(0.1)
+            rc = again.wait(10)
+        finally:
+            if again.poll() is None:
+                again.kill()
+                again.wait()
+    row.update({"rc": rc, "wall_s": round(time.monotonic() - started, 1)})
+    try:
+        summary = json.loads((run_dir / "summary.json").read_text())
+        replay = json.loads((run_dir / "replay_stats.json").read_text())
+    except (OSError, json.JSONDecodeError):
+        return {**row, "survived": False, "log_tail": log.read_text()[-2000:]}
+    made, stored, lost = _accounting(summary, replay)
+    expected_rc = 143 if spec["launcher_signal"] == signal.SIGTERM else -signal.SIGKILL
+    time.sleep(2)
+    row.update({"survived": first_rc == expected_rc and rc == 0 and made == env_steps and not left_after_fault,
+                "made": made, "stored": stored, "lost_counted": lost, "unaccounted": made - stored - lost,
+                "versions_monotonic": _monotonic(summary), "demo_identical": None,
+                "left_behind": len(left_after_fault) + len(_ray_processes(run_dir)),
+                "resumed_at": {w["name"]: w.get("resumed_at", 0) for w in summary["workers"]}})
     return row
 
 
@@ -235,8 +470,7 @@ def _disk_full(name: str, spec: dict, where: Path, env_steps: int) -> dict:
         replay = json.loads((run_dir / "replay_stats.json").read_text())
         made = sum(w["env_steps"] for w in summary["workers"])
         stored, lost = int(replay["tables"]["online"]["inserted"]), int(summary["replay"]["lost_items"])
-        failures = {"replay_checkpoint": (replay.get("checkpoint") or {}).get("failures", 0),
-                    "learner": summary["learner"].get("checkpoint_failures", 0)}
+        failures = _write_failures(summary, replay)
         time.sleep(2)
         return {"fault": name, "rc": rc, "wall_s": round(time.monotonic() - started, 1), "injected": True,
                 "recovery_s": 0.0, "survived": rc == 0 and made == env_steps and sum(failures.values()) > 0,
@@ -293,6 +527,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--env-steps", type=int, default=8000, help="budget of each run (default 8000)")
     p.add_argument("--work-dir", default="runs/chaos", help="where the runs go (default runs/chaos)")
     p.add_argument("--demos", action="store_true", help="retention with a demo shard, to check its bytes stay identical")
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--json", action="store_true", help="print the rows as one JSON object instead of a table")
     p.add_argument("--out", help="also write the JSON result to this file")
     p.set_defaults(func=chaos_main)

@@ -30,6 +30,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 from typing import Any, TextIO
@@ -344,6 +345,8 @@ class Run:
         self.progress = Progress(out, cfg.train.env_steps)
         self.replay_final: dict | None = None
         self.learner_final: dict | None = None
+        self.timeline: dict[str, float] = {}  # seconds each start-up stage took
+        self.env_spec: dict | None = None  # envspec.spec_to_dict of the run's env, shipped to components
 
     # -- start
 
@@ -375,14 +378,19 @@ class Run:
         cfg = self.cfg
         host = cfg.deploy.advertise_host or ("127.0.0.1" if self.local else "")
         port = self.builder.router_port(self.local)
+        began = time.monotonic()
         self._create("router", RouterActor, cfg.to_dict(), port, host)
-        self._await_started(["router"])
-        endpoint = self.where["router"]["endpoint"]
+        if host:  # its endpoint is known before it runs: the rest start with it (clients retry until it listens)
+            endpoint = f"tcp/{host}:{port}"
+        else:  # it listens on the address of the node it lands on: wait to learn which
+            self._await_started(["router"])
+            endpoint = self.where["router"]["endpoint"]
+        self.timeline["router"] = time.monotonic() - began
         # From here on every component is a client of the router where it landed.
         cfg = self.cfg = cfg.replace(transport=dataclasses.replace(cfg.transport, router=endpoint))
         self.builder = Builder(cfg)
         save_run_config(cfg, Path(cfg.train.run_dir) / "config.yaml")
-        plain = cfg.to_dict()
+        plain = {**cfg.to_dict(), "env_spec": self.env_spec}
         # The rest start together (each retries until the ones it needs answer): faster than in turn.
         self._create("replay-server", ReplayServerActor, plain)
         self._create("learner", LearnerActor, plain)
@@ -391,7 +399,8 @@ class Run:
             worker_plain = cfg.replace(transport=dataclasses.replace(cfg.transport, router=cfg.deploy.worker_router)).to_dict()
         for i, name in enumerate(self.builder.workers):
             self._create(name, EnvWorkerActor, worker_plain, i)
-        self._await_started(["replay-server", "learner", *self.builder.workers])
+        self._await_started(["router", "replay-server", "learner", *self.builder.workers])
+        self.timeline["rest"] = time.monotonic() - began - self.timeline["router"]
         for name in SERVICES:
             self.refs[name] = self.handles[name].run.remote()
         for name, share in zip(self.builder.workers, self.builder.budgets):
@@ -590,8 +599,9 @@ def _summary(run: Run, why: str, wall: float, out: TextIO) -> dict:
     actors = replay.get("actors", {})
     steps = sum(s["env_steps"] for s in summaries)
     episodes = sum(s["episodes"] for s in summaries)
-    lost_batches = sum(int(a.get("lost_batches", 0)) for a in actors.values())
-    lost_items = sum(int(a.get("lost_items", 0)) for a in actors.values())
+    total = replay.get("actors_total") or {}  # every actor, evicted ones included
+    lost_batches = int(total.get("lost_batches", sum(int(a.get("lost_batches", 0)) for a in actors.values())))
+    lost_items = int(total.get("lost_items", sum(int(a.get("lost_items", 0)) for a in actors.values())))
     # Batches a worker sent after the last one the server saw (it ended while the server was
     # down): no later batch shows their gap, so the worker's own count does.
     for s in summaries:
@@ -643,6 +653,29 @@ def _fmt(v: object) -> str:
 # ---------------------------------------------------------------------------- entry point
 
 
+class _SpecThread(threading.Thread):
+    """``env_spec(env)`` on a thread; ``result()`` joins it and returns the spec as a plain dict."""
+
+    def __init__(self, env: Any):
+        super().__init__(daemon=True, name="env-spec")
+        self.env, self._spec, self._error = env, None, None
+        self.start()
+
+    def run(self) -> None:
+        from laneshift.envspec import env_spec, spec_to_dict
+
+        try:
+            self._spec = spec_to_dict(env_spec(self.env))
+        except Exception as exc:  # noqa: BLE001 - raised again in the caller's thread
+            self._error = exc
+
+    def result(self) -> dict:
+        self.join()
+        if self._error is not None:
+            raise self._error
+        return self._spec
+
+
 def train(cfg: RunConfig, *, address: str | None = None, out: TextIO = sys.stdout, resume: bool = False,
           overwrite: bool = False) -> int:
     """A whole training run. ``address`` None: a private local Ray cluster; else that cluster's.
@@ -660,7 +693,11 @@ def train(cfg: RunConfig, *, address: str | None = None, out: TextIO = sys.stdou
     try:
         lock.acquire()
         prepare_run_dir(run_dir, resume, overwrite, out)
+        # The env's spec, computed here once while Ray starts (Ray's start is mostly waiting), is
+        # shipped to the replay server and the learner, which then build no simulator of their own.
+        spec_thread = _SpecThread(cfg.env)
         ray_conn.open(cfg)  # contacted and authenticated before anything starts
+        ray_s = time.monotonic() - started
         signals.install()  # replace Ray's SIGTERM handler (it would abort the cleanup after ~3 s)
         if signals.received:
             raise KeyboardInterrupt
@@ -668,7 +705,10 @@ def train(cfg: RunConfig, *, address: str | None = None, out: TextIO = sys.stdou
         if signals.received:
             raise KeyboardInterrupt
         run = Run(cfg, local=address is None, out=out, signals=signals)
+        run.env_spec = spec_thread.result()
         run.start()
+        run._say(f"train: started in {time.monotonic() - started:.1f} s (Ray {ray_s:.1f} s, router "
+                 f"{run.timeline['router']:.1f} s, replay server, learner and workers {run.timeline['rest']:.1f} s)")
         why = run.supervise()
         if why != "done":
             run._say(f"train: {why} received; stopping gracefully (checkpoints, summary)")
@@ -676,7 +716,10 @@ def train(cfg: RunConfig, *, address: str | None = None, out: TextIO = sys.stdou
         if run.progress.tty:
             out.write("\n")
         result = _summary(run, why, time.monotonic() - started, out)
-        (run_dir / "summary.json").write_text(json.dumps(result, indent=2))
+        try:
+            (run_dir / "summary.json").write_text(json.dumps(result, indent=2))
+        except OSError as exc:  # a full or read-only run dir: the summary above is all there is
+            print(f"train: could not write {run_dir / 'summary.json'}: {exc}", file=out, flush=True)
         rc = {"done": 0, "SIGINT": 130, "SIGTERM": 143}.get(why, 0)
     except LaunchError as exc:
         print(f"\ntrain: {exc}", file=out, flush=True)

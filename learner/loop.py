@@ -21,6 +21,7 @@ import collections
 import signal
 import threading
 import time
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -53,7 +54,7 @@ class Learner:
         self.crashes: collections.deque[float] = collections.deque(maxlen=100)
         self.episodes = 0
         self.actor_steps: dict[str, int] = {}
-        self.last_update: dict[str, float] = {}
+        self.last_update: Mapping[str, float] = {}  # the last update's metrics (dqn.UpdateMetrics: read lazily)
         self.replay_stats: dict = {}
         self.stop_reason: dict | None = None
         self.started = time.monotonic()
@@ -174,18 +175,23 @@ class Learner:
         return self.stop.is_set()
 
     def _updates(self, batch: wire.SampledBatch) -> None:
+        prioritized = bool(batch.info.get("prioritized"))
         td_abs = []
         for part in _split(batch):
-            metrics = self.agent.update(part)
-            td_abs.append(self.agent.last_td_abs)
-            self.last_update = metrics
+            # The metrics stay tensors until _status reads them (once per log interval): no
+            # read-back per update. The |TD errors| are read back once per batch, and only for
+            # a prioritized replay.
+            self.last_update = self.agent.update(part)
+            if prioritized:
+                td_abs.append(self.agent.last_td_abs_tensor)
             if self.agent.updates % self.lcfg.checkpoint_every == 0:
                 self.checkpoint("latest")
                 if self.lcfg.keep_checkpoints:
                     self.checkpoint(f"u{self.agent.updates:08d}")
-        if batch.info.get("prioritized"):
+        if prioritized:
+            priority = torch.cat(td_abs).to("cpu", torch.float32).numpy()
             self.links.send_priorities(wire.encode_priorities(wire.PriorityUpdate(
-                index=batch.index, is_demo=batch.is_demo, priority=np.concatenate(td_abs).astype(np.float32))))
+                index=batch.index, is_demo=batch.is_demo, priority=priority)))
 
     def _fetch(self, req: wire.SampleRequest) -> wire.SampledBatch | None:
         """One sample request; on 'not ready' or no answer waits a little and returns None."""
@@ -347,13 +353,23 @@ UPDATE_FIELDS = ("obs", "action", "reward", "next_obs", "terminated", "steps", "
 
 
 def _split(batch: wire.SampledBatch) -> list[dict[str, np.ndarray]]:
-    parts = {k: np.split(getattr(batch, k), batch.num_batches)
-             for k in UPDATE_FIELDS}
-    return [{k: v[i] for k, v in parts.items()} for i in range(batch.num_batches)]
+    """The batch's ``num_batches`` update batches: row slices (views, no copies) of each field."""
+    fields = {k: getattr(batch, k) for k in UPDATE_FIELDS}
+    rows, rest = divmod(len(batch.action), batch.num_batches)
+    if rest:
+        raise ValueError(f"{len(batch.action)} rows do not split into {batch.num_batches} batches")
+    return [{k: v[i * rows:(i + 1) * rows] for k, v in fields.items()} for i in range(batch.num_batches)]
 
 
 def run_learner(cfg: RunConfig) -> int:
     """Learner process entry point: runs until a stop command, SIGINT or SIGTERM."""
+    # learner.torch_threads (default 1), a deliberate choice: the learner shares its node with the
+    # replay server, the zenoh router and often actors, and a second intra-op thread would compete
+    # with them for the same cores (on a 2-core node, for all of them) while the default MLP's
+    # matmuls (batch 256 x 256 units) are small for intra-op parallelism; a GPU learner's CPU side
+    # only launches kernels. Measured on a 2-core machine with the whole system running, two threads
+    # made the run slower (0.71x and 0.95x env steps/s, issue 13); raise it on a node whose cores
+    # the learner has to itself.
     torch.set_num_threads(cfg.learner.torch_threads)
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):

@@ -9,6 +9,7 @@ import torch
 from torch import nn
 
 from laneshift import wire
+from laneshift.wire import tensors_digest  # noqa: F401 - where it used to live
 
 
 def to_wire(net: nn.Module, version: int, phase: int, updates: int) -> bytes:
@@ -26,17 +27,6 @@ def load_into(net: nn.Module, tensors: dict[str, np.ndarray]) -> None:
         if tuple(v.shape) != tuple(expected[k].shape):
             raise ValueError(f"weights {k}: shape {tuple(v.shape)} != {tuple(expected[k].shape)}")
     net.load_state_dict(state)
-
-
-def tensors_digest(tensors: dict[str, np.ndarray]) -> str:
-    """sha256 over names and bytes in name order: equal digests mean equal weights."""
-    import hashlib
-
-    h = hashlib.sha256()
-    for name in sorted(tensors):
-        h.update(name.encode())
-        h.update(np.ascontiguousarray(tensors[name]).tobytes())
-    return h.hexdigest()
 
 
 def save_checkpoint(net: nn.Module, path: str | Path, meta: dict[str, str | int | float]) -> Path:

@@ -18,6 +18,7 @@ Layout of ``<run dir>/replay_checkpoint/``: one ``.npy`` per column (``obs``, ``
 
 from __future__ import annotations
 
+import collections
 import json
 import os
 import shutil
@@ -26,6 +27,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+
+from .core import BATCH_HISTORY
 
 if TYPE_CHECKING:  # pragma: no cover
     from .core import ReplayCore
@@ -72,6 +75,11 @@ def write_checkpoint(core: "ReplayCore", directory: str | Path) -> dict:
             meta = {"format": FORMAT, "obs_shape": list(core.schema.obs_shape), "obs_dtype": core.schema.obs_dtype,
                     "n_actions": core.schema.n_actions, "capacity": table.capacity, "inserted": table.inserted,
                     "actors": {k: dict(v) for k, v in core.actors.items()}, "actor_index": dict(core._actor_index),
+                    # Read together with "actors", after the copy: restore uses it to drop a batch
+                    # the copy caught in part and to find each actor's env steps at its last whole batch.
+                    "batch_history": {k: [list(b) for b in h] for k, h in core.batch_history.items()},
+                    "evicted": {k: v[0] for k, v in core._evicted.items()},
+                    "evicted_total": dict(core.evicted_total),
                     "phase": core.phase, "mode": core.mode, "time": time.time(),
                     # Which run wrote it: a server of another run (or another env) refuses to restore it.
                     "identity": dict(core.identity)}
@@ -90,6 +98,33 @@ def write_checkpoint(core: "ReplayCore", directory: str | Path) -> dict:
     tmp.rename(directory)
     shutil.rmtree(old, ignore_errors=True)
     return {"items": items, "seconds": round(time.monotonic() - started, 3), "path": str(directory)}
+
+
+def _whole_batches(order: np.ndarray, actor: np.ndarray, seq: np.ndarray, index: dict[str, int],
+                   history: dict[str, dict[int, tuple[int, int]]]) -> tuple[np.ndarray, dict[str, tuple[int, int | None]]]:
+    """Drop each actor's newest batch if the chunked copy caught it only in part, and say where each
+    actor resumes: (seq of its newest whole batch, its env steps then; None if not in the history).
+
+    ``order`` holds the rows to restore. The copy sweeps the ring once, so of each actor's batches it
+    holds all up to some point (older ones the ring overwrote aside) plus at most one in part.
+    """
+    keep = np.ones(order.size, bool)
+    resume: dict[str, tuple[int, int | None]] = {}
+    for name, i in index.items():
+        mine = np.flatnonzero(actor[order] == i)
+        if not mine.size:
+            continue
+        seqs = seq[order][mine]
+        newest = int(seqs.max())
+        known = history.get(name, {})
+        if newest not in known:
+            resume[name] = (newest, None)
+        elif int((seqs == newest).sum()) < known[newest][1]:
+            keep[mine[seqs == newest]] = False  # a part of a batch: its items count as lost, none kept
+            resume[name] = (newest - 1, known[newest][0] - known[newest][1])
+        else:
+            resume[name] = (newest, known[newest][0])
+    return order[keep], resume
 
 
 def restore_checkpoint(core: "ReplayCore", directory: str | Path) -> int:
@@ -120,6 +155,10 @@ def restore_checkpoint(core: "ReplayCore", directory: str | Path) -> int:
     if order.size and np.asarray(cols["steps"])[order].min() < 1:  # the wire refuses such items; so does this
         raise CheckpointError(f"replay checkpoint {directory}: an item with steps < 1")
     table = core.online
+    index = {k: int(v) for k, v in meta.get("actor_index", {}).items()}
+    history = {k: {int(seq): (int(steps), int(n)) for seq, steps, n in h}
+               for k, h in meta.get("batch_history", {}).items()}
+    order, resume = _whole_batches(order, np.asarray(cols["actor"]), np.asarray(cols["seq"]), index, history)
     order = order[-table.capacity:]  # a smaller table keeps the newest items
     with core._lock:
         # The items go back oldest first into rows 0..n-1 with keys renumbered 0..n-1: no holes and
@@ -130,14 +169,26 @@ def restore_checkpoint(core: "ReplayCore", directory: str | Path) -> int:
         table.key[:n] = np.arange(n)
         table.inserted = n
         core.actors.update({k: {"lost_items": 0, **v} for k, v in meta.get("actors", {}).items()})
-        core._actor_index.update({k: int(v) for k, v in meta.get("actor_index", {}).items()})
-        # Each actor's last batch is the newest one whose items are really here (the stats in
-        # meta.json were read after the chunked copy and may name batches it missed), so every
-        # batch missing after a restart shows up as a seq gap, i.e. as lost.
-        for name, index in core._actor_index.items():
-            mine = table.actor[:n] == index
-            if name in core.actors and mine.any():
-                core.actors[name]["last_seq"] = int(table.seq[:n][mine].max())
+        core._actor_index.update(index)
+        used = set(index.values())
+        core._free_indices.extend(i for i in range(len(index)) if i not in used)
+        now = time.monotonic()
+        for name in core.actors:
+            core._last_seen[name] = now
+            core.batch_history[name] = collections.deque(
+                (tuple(b) for b in meta.get("batch_history", {}).get(name, ())), maxlen=BATCH_HISTORY)
+        for name, stats in meta.get("evicted", {}).items():
+            core._evicted[name] = (stats, collections.deque(maxlen=BATCH_HISTORY))
+        core.evicted_total.update({k: int(v) for k, v in meta.get("evicted_total", {}).items()})
+        # Each actor resumes after the newest batch whose items are all here (the stats in
+        # meta.json were read after the chunked copy and may name batches it missed), with the env
+        # steps it had made by then: every batch missing after a restart shows up as a seq gap and
+        # its items as lost, and a restarted worker makes exactly the missing steps again.
+        for name, (last_seq, env_steps) in resume.items():
+            if name in core.actors:
+                core.actors[name]["last_seq"] = last_seq
+                if env_steps is not None:
+                    core.actors[name]["env_steps"] = env_steps
         if core.cfg.pretrains and meta.get("mode") == core.mode:
             core.phase = max(core.phase, int(meta.get("phase", core.phase)))
         # The restored items count as already sampled at the configured ratio: counting them as

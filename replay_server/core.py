@@ -41,6 +41,13 @@ from .sum_tree import SumTree
 from .storage import DemoTable, RingTable
 
 MAX_ACTORS = 4096
+#: Evicted actors remembered (name -> their state) so one that comes back continues its counts;
+#: an actor evicted from this too is new when it returns, and its earlier batches read as lost
+#: (over-counted, never hidden).
+MAX_EVICTED = 4 * MAX_ACTORS
+#: Each actor's newest batches (seq, env_steps, items), kept so a checkpoint's restore can tell a
+#: batch its chunked copy caught only in part, and the env steps at the last batch it holds whole.
+BATCH_HISTORY = 64
 #: Actors listed in a stats reply: the reply stays the same size whatever the number of actors
 #: (at ~650 actors the full list outgrew the wire's 64 KiB JSON limit and broke every stats query).
 #: ``actors_total`` sums all of them; ``actor_page`` (control ``{"cmd": "actors"}``, HTTP
@@ -86,6 +93,12 @@ class ReplayCore:
         self.dropped: collections.Counter[str] = collections.Counter()
         self.actors: dict[str, dict[str, int]] = {}
         self._actor_index: dict[str, int] = {}
+        self._free_indices: collections.deque[int] = collections.deque()  # of evicted actors, reused
+        self._last_seen: dict[str, float] = {}  # actor -> monotonic time of its newest batch
+        self._evicted: collections.OrderedDict[str, tuple[dict[str, int], collections.deque]] = \
+            collections.OrderedDict()
+        self.evicted_total: collections.Counter[str] = collections.Counter()  # counters of evicted actors
+        self.batch_history: dict[str, collections.deque] = {}  # actor -> deque of (seq, env_steps, items)
         self.samples = 0  # rows sampled while the rate limiter applies
         self.sampled_rows = 0
         self.sampled_demo_rows = 0
@@ -128,13 +141,11 @@ class ReplayCore:
         with self._lock:
             stats = self.actors.get(batch.actor)
             if stats is None:
-                if len(self.actors) >= MAX_ACTORS:
+                stats = self._admit(batch.actor)
+                if stats is None:
                     self.rejected["too_many_actors"] += 1
                     return "too_many_actors"
-                self._actor_index[batch.actor] = len(self._actor_index)
-                stats = self.actors[batch.actor] = {"batches": 0, "items": 0, "stored": 0, "last_seq": -1,
-                                                    "lost_batches": 0, "lost_items": 0, "last_version": -1,
-                                                    "env_steps": 0}
+            self._last_seen[batch.actor] = time.monotonic()
             if batch.seq > stats["last_seq"] + 1:
                 # A gap in seq: batches lost in transit, or stored by a server that died before its
                 # checkpoint. An actor first seen at seq k > 0 lost its first k batches here (a
@@ -147,6 +158,7 @@ class ReplayCore:
             stats["items"] += len(batch)
             stats["last_version"] = max(stats["last_version"], batch.weights_version)
             stats["env_steps"] = max(stats["env_steps"], batch.env_steps)
+            self.batch_history[batch.actor].append((batch.seq, batch.env_steps, len(batch)))
             if self.cfg.pretrains and (self.phase == 1 or batch.phase == 1):
                 # Paper: in phase 1 the agent's own transitions are not stored.
                 self.dropped[f"{self.mode}_phase1"] += len(batch)
@@ -158,6 +170,45 @@ class ReplayCore:
             stats["stored"] += len(batch)
             self._rates.add("inserts", len(batch))
         return None
+
+    def _admit(self, actor: str) -> dict[str, int] | None:
+        """State for an actor not in the table (called under the lock): its remembered state if it
+        was evicted, else fresh. At MAX_ACTORS the actor idle longest is evicted first, if idle for
+        ``replay.actor_idle_evict_s``; None if none is (the batch is refused)."""
+        if len(self.actors) >= MAX_ACTORS:
+            oldest = min(self._last_seen, key=self._last_seen.__getitem__, default=None)
+            if oldest is None or time.monotonic() - self._last_seen[oldest] < self.cfg.actor_idle_evict_s:
+                return None
+            self._evict(oldest)
+        remembered = self._evicted.pop(actor, None)
+        if remembered is not None:
+            stats, history = remembered
+            for key, value in stats.items():  # its counters come back out of the evicted totals
+                if key in _SUMMED:
+                    self.evicted_total[key] -= value
+            self.evicted_total["count"] -= 1
+        else:
+            stats = {"batches": 0, "items": 0, "stored": 0, "last_seq": -1, "lost_batches": 0, "lost_items": 0,
+                     "last_version": -1, "env_steps": 0}
+            history = collections.deque(maxlen=BATCH_HISTORY)
+        self._actor_index[actor] = self._free_indices.popleft() if self._free_indices else len(self._actor_index)
+        self.actors[actor] = stats
+        self.batch_history[actor] = history
+        return stats
+
+    def _evict(self, actor: str) -> None:
+        """Move an idle actor's state out of the live table (called under the lock); its counters
+        stay in the totals, and its row index goes to the next new actor."""
+        stats = self.actors.pop(actor)
+        self._free_indices.append(self._actor_index.pop(actor))
+        self._last_seen.pop(actor, None)
+        self._evicted[actor] = (stats, self.batch_history.pop(actor))
+        for key in _SUMMED:
+            self.evicted_total[key] += int(stats.get(key, 0))
+        self.evicted_total["count"] += 1
+        self.evicted_total["evictions"] += 1
+        if len(self._evicted) > MAX_EVICTED:
+            self._evicted.popitem(last=False)  # forgotten: its counters stay in evicted_total
 
     def _reject(self, reason: str) -> str:
         with self._lock:
@@ -324,6 +375,8 @@ class ReplayCore:
         spent twice nor lost, and its sequence numbers go on (gaps are counted as lost)."""
         with self._lock:
             stats = self.actors.get(actor)
+            if stats is None and actor in self._evicted:
+                stats = self._evicted[actor][0]
             if stats is None:
                 return {"env_steps": 0, "next_seq": 0, "known": 0}
             return {"env_steps": int(stats["env_steps"]), "next_seq": int(stats["last_seq"]) + 1, "known": 1}
@@ -337,12 +390,12 @@ class ReplayCore:
                     "actors": {n: dict(self.actors[n]) for n in names}}
 
     def _actors_total(self) -> dict[str, int]:
-        """Sums over every actor (called under the lock)."""
-        keys = ("batches", "items", "stored", "lost_batches", "lost_items", "env_steps")
-        total = {k: sum(int(a.get(k, 0)) for a in self.actors.values()) for k in keys}
+        """Sums over every actor, evicted ones included (called under the lock)."""
+        total = {k: sum(int(a.get(k, 0)) for a in self.actors.values()) + self.evicted_total[k] for k in _SUMMED}
         versions = [int(a["last_version"]) for a in self.actors.values()]
         return {"count": len(self.actors), **total, "min_version": min(versions, default=-1),
-                "max_version": max(versions, default=-1)}
+                "max_version": max(versions, default=-1), "evicted": self.evicted_total["count"],
+                "evictions": self.evicted_total["evictions"]}
 
     def stats(self, all_actors: bool = False) -> dict[str, Any]:
         """Counters of everything. ``actors`` lists the first ACTORS_IN_STATS actors by name
@@ -358,6 +411,9 @@ class ReplayCore:
                 "mode": self.mode,
                 "phase": self.phase,
                 "http_url": self.http_url,
+                # What a TRANSITIONS message must carry (also on replay/info and HTTP /info).
+                "obs_shape": list(self.schema.obs_shape), "obs_dtype": self.schema.obs_dtype,
+                "n_actions": self.schema.n_actions,
                 "uptime_s": round(time.monotonic() - self.started, 3),
                 "tables": {
                     "online": {"size": online_size, "capacity": self.online.capacity, "inserted": self.online.inserted,
@@ -384,6 +440,9 @@ class ReplayCore:
                 "rate_limiter": self.limiter.state(size=online_size, inserts=self.online.inserted,
                                                    samples=self.samples),
             }
+
+
+_SUMMED = ("batches", "items", "stored", "lost_batches", "lost_items", "env_steps")
 
 
 def _retry(reason: str, detail: str, retry_ms: int) -> WireError:

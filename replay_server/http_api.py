@@ -9,11 +9,21 @@ with uvicorn in a daemon thread. Endpoints (details and example responses in doc
   from the oldest item; rows are copied out under the core's lock, so every item is whole even
   while actors insert;
 - ``GET /demo``: the demo shard's metadata, sha256 and sizes;
-- ``GET /metrics``: Prometheus text exposition format 0.0.4, names prefixed ``laneshift_replay_``;
+- ``GET /info``: what ``replay/info`` answers over zenoh (observation shape and dtype, action count);
+- ``GET /metrics``: Prometheus text exposition format 0.0.4, names prefixed ``laneshift_replay_``, plus
+  the process's ``process_*`` metrics;
 - ``GET /openapi.json`` and ``GET /docs``: the schema FastAPI generates.
 
 Nothing here writes to the core. Endpoints are plain ``def`` functions: FastAPI runs them in its
 worker threads, so waiting for the core's lock never blocks the event loop.
+
+``/metrics`` is built with prometheus_client (metric families read from ``full_stats()`` at scrape
+time, on a registry of the app's own) rather than a hand-written text renderer: it does the format's
+escaping, ``_total`` suffixes and histogram buckets, and brings the ``process_*`` collector, so this
+module only says which numbers are which metrics.
+
+May import: the replay core (and, for ``/info``, ``.service``), fastapi, uvicorn, prometheus_client,
+numpy; nothing that writes to the core.
 
     >>> from laneshift.config import ReplayConfig
     >>> from laneshift.wire import TransitionSchema
@@ -38,6 +48,8 @@ import numpy as np
 import uvicorn
 from fastapi import FastAPI, HTTPException, Query
 from fastapi.responses import JSONResponse, Response
+from prometheus_client import CollectorRegistry, ProcessCollector, generate_latest
+from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, HistogramMetricFamily
 from pydantic import BaseModel, Field
 
 from .core import MAX_ACTOR_PAGE, ReplayCore
@@ -143,6 +155,16 @@ class ItemsPage(BaseModel):
 
 class Problem(BaseModel):
     detail: Any
+
+
+class Info(BaseModel):
+    wire_version: int = Field(description="the wire version this server speaks (docs/wire.md)")
+    obs_shape: list[int] = Field(description="shape of one observation: TRANSITIONS carry obs [B, *obs_shape]")
+    obs_dtype: str = Field(description="numpy little-endian code of obs and next_obs, e.g. <f4 or |u1")
+    n_actions: int = Field(description="actions are integers in [0, n_actions)")
+    run_id: str | None = Field(description="transport.run_id: keys are laneshift/<run_id>/...")
+    mode: str = Field(description="replay.demo_mode")
+    http_url: str | None = Field(description="this API's address as the server announces it, null if off")
 
 
 # --------------------------------------------------------------------------- reading the core
@@ -269,109 +291,123 @@ def demo_info(core: ReplayCore) -> dict:
     }
 
 
-# --------------------------------------------------------------------------- Prometheus text format 0.0.4
+# --------------------------------------------------------------------------- Prometheus (prometheus_client)
 
 
-def _label_value(value: Any) -> str:
-    return str(value).replace("\\", "\\\\").replace("\n", "\\n").replace('"', '\\"')
+def _family(kind: str, name: str, help_text: str, samples: list[tuple[dict[str, Any], Any]],
+            ) -> GaugeMetricFamily | CounterMetricFamily:
+    """One metric family; samples whose value is None (does not exist yet) are left out."""
+    labels = list(samples[0][0]) if samples else []
+    family = {"gauge": GaugeMetricFamily, "counter": CounterMetricFamily}[kind](
+        "laneshift_replay_" + name, help_text, labels=labels)
+    for label_values, value in samples:
+        if value is not None:
+            family.add_metric([str(label_values[k]) for k in labels], float(value))
+    return family
 
 
-def _number(value: Any) -> str:
-    if isinstance(value, bool):
-        return "1" if value else "0"
-    if isinstance(value, (int, np.integer)):
-        return str(int(value))
-    value = float(value)
-    if math.isnan(value):
-        return "NaN"
-    if math.isinf(value):
-        return "+Inf" if value > 0 else "-Inf"
-    return repr(int(value)) if value.is_integer() and abs(value) < 2**53 else repr(value)
-
-
-class _Exposition:
-    def __init__(self) -> None:
-        self.lines: list[str] = []
-
-    def metric(self, name: str, kind: str, help_text: str,
-               samples: list[tuple[dict[str, Any], Any]] | tuple[dict[str, Any], Any]) -> None:
-        if isinstance(samples, tuple):
-            samples = [samples]
-        samples = [(labels, v) for labels, v in samples if v is not None]
-        full = "laneshift_replay_" + name
-        self.lines.append(f"# HELP {full} {help_text.replace(chr(92), chr(92) * 2).replace(chr(10), chr(92) + 'n')}")
-        self.lines.append(f"# TYPE {full} {kind}")
-        for labels, value in samples:
-            label_text = ",".join(f'{k}="{_label_value(v)}"' for k, v in labels.items())
-            self.lines.append(f"{full}{{{label_text}}} {_number(value)}" if label_text else f"{full} {_number(value)}")
-
-    def text(self) -> str:
-        return "\n".join(self.lines) + "\n"
-
-
-def render_metrics(stats: dict) -> str:
-    """``full_stats()`` as Prometheus text exposition format 0.0.4."""
-    m = _Exposition()
+def stats_metrics(stats: dict) -> list:
+    """``full_stats()`` as metric families (the counters are the core's own, read at scrape time)."""
     t = stats["tables"]
-    m.metric("info", "gauge", "Constant 1, labelled with the demo mode and the demo shard's sha256.",
-             ({"mode": stats["mode"], "demo_sha256": t["demo"].get("sha256", "")}, 1))
-    m.metric("phase", "gauge", "Rehearsal phase (1: demos only, 2: online); 0 in the other modes.",
-             ({}, stats["phase"]))
-    m.metric("uptime_seconds", "gauge", "Seconds since the replay core started.", ({}, stats["uptime_s"]))
-    m.metric("table_size", "gauge", "Items in each table that sampling can draw.",
-             [({"table": n}, t[n]["size"]) for n in TABLES])
-    m.metric("table_capacity", "gauge", "Items each table can hold (demo: its fixed region).",
-             [({"table": n}, t[n].get("capacity")) for n in TABLES])
-    m.metric("table_bytes", "gauge", "Bytes held by each table (demo: the whole loaded shard).",
-             [({"table": n}, t[n].get("bytes")) for n in TABLES])
-    m.metric("demo_held_items", "gauge", "Demo transitions loaded from the shard(s).", ({}, t["demo"].get("held")))
-    m.metric("inserted_total", "counter", "Items ever inserted into the online table.",
-             ({"table": "online"}, t["online"]["inserted"]))
-    m.metric("sampled_rows_total", "counter", "Rows sampled, by the table they came from.",
-             [({"table": n}, t[n].get("sampled_rows")) for n in TABLES])
-    m.metric("sample_requests_total", "counter", "Sample requests, by outcome.",
-             [({"result": k}, v) for k, v in sorted(stats.get("requests", {}).items())])
-    m.metric("rejected_total", "counter", "Messages refused, by reason.",
-             [({"reason": k}, v) for k, v in sorted(stats.get("rejected", {}).items())])
-    m.metric("dropped_total", "counter", "Valid items deliberately not stored, by reason.",
-             [({"reason": k}, v) for k, v in sorted(stats.get("dropped", {}).items())])
-    m.metric("inserts_per_second", "gauge", "Items inserted per second over the last 5 s.",
-             [({"table": n}, t[n].get("inserts_per_s")) for n in TABLES])
-    m.metric("samples_per_second", "gauge", "Rows sampled per second over the last 5 s (per table: split by "
-             "the table's share of recent samples).", [({"table": n}, t[n].get("samples_per_s")) for n in TABLES])
-    m.metric("demo_share", "gauge", "Share of demo items in the sampled buffer and in recent sampled rows.",
-             [({"scope": "buffer"}, stats["demo_share_buffer"]),
-              ({"scope": "recent_samples"}, stats["demo_share_recent_samples"])])
+    rl, ckpt = stats.get("rate_limiter") or {}, stats.get("checkpoint") or {}
     actors = sorted(stats.get("actors", {}).items())
     in_buffer = t["online"].get("items_per_actor", {})
-    m.metric("actor_buffer_items", "gauge", "Online items in the buffer now, by actor.",
-             [({"actor": a}, in_buffer.get(a, 0)) for a, _ in actors])
+
+    def per_table(key: str) -> list:
+        return [({"table": n}, t[n].get(key)) for n in TABLES]
+
+    def by(label: str, counts: dict) -> list:
+        return [({label: k}, v) for k, v in sorted(counts.items())]
+
+    def one(value: Any) -> list:
+        return [({}, value)]
+
+    out = [
+        _family("gauge", "info", "Constant 1, labelled with the demo mode and the demo shard's sha256.",
+                [({"mode": stats["mode"], "demo_sha256": t["demo"].get("sha256", "")}, 1)]),
+        _family("gauge", "phase", "Rehearsal phase (1: demos only, 2: online); 0 in the other modes.",
+                one(stats["phase"])),
+        _family("gauge", "uptime_seconds", "Seconds since the replay core started.", one(stats["uptime_s"])),
+        _family("gauge", "table_size", "Items in each table that sampling can draw.", per_table("size")),
+        _family("gauge", "table_capacity", "Items each table can hold (demo: its fixed region).",
+                per_table("capacity")),
+        _family("gauge", "table_bytes", "Bytes held by each table (demo: the whole loaded shard).",
+                per_table("bytes")),
+        _family("gauge", "demo_held_items", "Demo transitions loaded from the shard(s).", one(t["demo"].get("held"))),
+        _family("counter", "inserted", "Items ever inserted into the online table.",
+                [({"table": "online"}, t["online"]["inserted"])]),
+        _family("counter", "sampled_rows", "Rows sampled, by the table they came from.", per_table("sampled_rows")),
+        _family("counter", "sample_requests", "Sample requests, by outcome.", by("result", stats.get("requests", {}))),
+        _family("counter", "rejected", "Messages refused, by reason.", by("reason", stats.get("rejected", {}))),
+        _family("counter", "dropped", "Valid items deliberately not stored, by reason.",
+                by("reason", stats.get("dropped", {}))),
+        _family("gauge", "demo_share_ratio", "Share of demo items in the sampled buffer and in recent sampled rows.",
+                [({"scope": "buffer"}, stats["demo_share_buffer"]),
+                 ({"scope": "recent_samples"}, stats["demo_share_recent_samples"])]),
+        _family("gauge", "actor_buffer_items", "Online items in the buffer now, by actor.",
+                [({"actor": a}, in_buffer.get(a, 0)) for a, _ in actors]),
+    ]
     for field, kind, name, help_text in (
-            ("items", "counter", "actor_items_total", "Items received, by actor."),
-            ("stored", "counter", "actor_stored_total", "Items stored, by actor."),
-            ("batches", "counter", "actor_batches_total", "Transition messages received, by actor."),
-            ("lost_batches", "counter", "actor_lost_batches_total", "Messages missing from the sequence, by actor."),
-            ("lost_items", "counter", "actor_lost_items_total",
+            ("items", "counter", "actor_items", "Items received, by actor."),
+            ("stored", "counter", "actor_stored", "Items stored, by actor."),
+            ("batches", "counter", "actor_batches", "Transition messages received, by actor."),
+            ("lost_batches", "counter", "actor_lost_batches", "Messages missing from the sequence, by actor."),
+            ("lost_items", "counter", "actor_lost_items",
              "Items in the missing messages (from the actor's env-step count), by actor."),
-            ("last_version", "gauge", "actor_weights_version", "Newest weights version an actor acted with."),
-            ("env_steps", "gauge", "actor_env_steps", "An actor's cumulative env steps.")):
-        m.metric(name, kind, help_text, [({"actor": a}, s.get(field)) for a, s in actors])
-    rl = stats.get("rate_limiter") or {}
-    m.metric("rate_limiter_insert_ok", "gauge", "1 while actors may insert.", ({}, rl.get("insert_ok")))
-    m.metric("rate_limiter_size_ok", "gauge", "1 once the online table has min_size items.", ({}, rl.get("size_ok")))
-    m.metric("rate_limiter_rows_owed", "gauge", "Rows the learner may still sample (absent without a ratio).",
-             ({}, rl.get("rows_owed_to_learner")))
-    m.metric("rate_limiter_samples_per_insert", "gauge", "Configured sampled rows per inserted item.",
-             ({}, rl.get("samples_per_insert")))
-    m.metric("rate_limiter_tolerance_rows", "gauge", "Configured slack either side of the ratio.",
-             ({}, rl.get("tolerance")))
-    m.metric("rate_limiter_min_size", "gauge", "Online items needed before sampling.", ({}, rl.get("min_size")))
-    ckpt = stats.get("checkpoint") or {}
-    m.metric("checkpoint_age_seconds", "gauge", "Seconds since the last checkpoint (absent before the first).",
-             ({}, ckpt.get("age_s")))
-    m.metric("checkpoint_items", "gauge", "Items in the last checkpoint.", ({}, ckpt.get("items")))
-    m.metric("checkpoint_duration_seconds", "gauge", "How long the last checkpoint took.", ({}, ckpt.get("seconds")))
-    return m.text()
+            ("env_steps", "counter", "actor_env_steps", "An actor's cumulative env steps."),
+            ("last_version", "gauge", "actor_weights_version", "Newest weights version an actor acted with.")):
+        out.append(_family(kind, name, help_text, [({"actor": a}, s.get(field)) for a, s in actors]))
+    out += [
+        _family("gauge", "rate_limiter_insert_ok", "1 while actors may insert.", one(rl.get("insert_ok"))),
+        _family("gauge", "rate_limiter_size_ok", "1 once the online table has min_size items.", one(rl.get("size_ok"))),
+        _family("gauge", "rate_limiter_rows_owed", "Rows the learner may still sample (absent without a ratio).",
+                one(rl.get("rows_owed_to_learner"))),
+        _family("gauge", "rate_limiter_samples_per_insert", "Configured sampled rows per inserted item.",
+                one(rl.get("samples_per_insert"))),
+        _family("gauge", "rate_limiter_tolerance_rows", "Configured slack either side of the ratio.",
+                one(rl.get("tolerance"))),
+        _family("gauge", "rate_limiter_min_size", "Online items needed before sampling.", one(rl.get("min_size"))),
+        _family("gauge", "checkpoint_age_seconds", "Seconds since the last checkpoint (absent before the first).",
+                one(ckpt.get("age_s"))),
+        _family("gauge", "checkpoint_items", "Items in the last checkpoint.", one(ckpt.get("items"))),
+        _family("gauge", "checkpoint_duration_seconds", "How long the last checkpoint took.", one(ckpt.get("seconds"))),
+        _family("counter", "checkpoint_failures", "Checkpoint writes that failed (e.g. a full disk).",
+                one(ckpt.get("failures", 0))),
+    ]
+    return out
+
+
+def sample_latency_metric(latency: Any) -> HistogramMetricFamily:
+    """The sample queryable's time per query (``service.SampleLatency``; no samples without one)."""
+    family = HistogramMetricFamily("laneshift_replay_sample_duration_seconds",
+                                   "Time the replay server spent answering one sample query (decode, sample, "
+                                   "encode), by result (batch or error).", labels=["result"])
+    if latency is not None:
+        for result, (counts, total) in sorted(latency.snapshot().items()):
+            cumulative = np.cumsum(counts).tolist()
+            buckets = [(repr(le), c) for le, c in zip(latency.BUCKETS, cumulative)] + [("+Inf", cumulative[-1])]
+            family.add_metric([result], buckets, total)
+    return family
+
+
+class _CoreCollector:
+    """Everything ``/metrics`` shows of a core, read at scrape time (prometheus_client calls ``collect``)."""
+
+    def __init__(self, core: ReplayCore):
+        self.core = core
+
+    def collect(self):
+        yield from stats_metrics(full_stats(self.core))
+        yield sample_latency_metric(getattr(self.core, "sample_latency", None))
+
+
+def metrics_registry(core: ReplayCore) -> CollectorRegistry:
+    """A registry of its own per app (not prometheus_client's global one): the core's metrics and
+    this process's ``process_*`` metrics (CPU seconds, resident memory, open fds, start time)."""
+    registry = CollectorRegistry(auto_describe=False)
+    registry.register(_CoreCollector(core))
+    ProcessCollector(registry=registry)
+    return registry
 
 
 # --------------------------------------------------------------------------- the app
@@ -429,10 +465,20 @@ def make_app(core: ReplayCore) -> FastAPI:
         """The demo shard: metadata (as recorded), sha256, items and bytes loaded and in the buffer."""
         return SafeJSONResponse(demo_info(core))
 
+    @app.get("/info", response_model=None, responses={200: {"model": Info}})
+    def info() -> Response:
+        """What ``replay/info`` answers over zenoh: the wire version, observation shape and dtype,
+        action count, run id, demo mode and this API's URL."""
+        from .service import ReplayService  # zenoh and the config: loaded already in a replay server
+
+        return SafeJSONResponse(ReplayService.info_of(core, core.identity.get("run_id")))
+
+    registry = metrics_registry(core)
+
     @app.get("/metrics", response_class=Response, responses={200: {"content": {PROMETHEUS_CONTENT_TYPE: {}}}})
     def metrics() -> Response:
-        """Prometheus text exposition format 0.0.4."""
-        return Response(render_metrics(full_stats(core)), media_type=PROMETHEUS_CONTENT_TYPE)
+        """Prometheus text exposition format 0.0.4 (prometheus_client's ``generate_latest``)."""
+        return Response(generate_latest(registry), media_type=PROMETHEUS_CONTENT_TYPE)
 
     return app
 

@@ -2,14 +2,16 @@
 
 - subscribes to ``laneshift/<run>/transitions/*``; a FIFO channel feeds one ingest thread, so
   a slow server back-pressures publishers (they use BLOCK) instead of losing data;
-- answers ``.../replay/sample`` (SampleRequest -> BATCH or ERROR), ``.../replay/stats`` (JSON)
-  and ``.../replay/control`` (JSON commands such as ``{"cmd": "set_phase", "phase": 2}``).
+- answers ``.../replay/sample`` (SampleRequest -> BATCH or ERROR), ``.../replay/stats`` (JSON),
+  ``.../replay/control`` (JSON commands such as ``{"cmd": "set_phase", "phase": 2}``) and
+  ``.../replay/info`` (JSON: the observation shape/dtype and action count TRANSITIONS must have).
 
 Run it with ``laneshift replay-server --config run.yaml``.
 """
 
 from __future__ import annotations
 
+import bisect
 import json
 import os
 import shutil
@@ -29,6 +31,28 @@ from .core import ReplayCore
 from .demo_loading import load_demo_table
 
 
+class SampleLatency:
+    """Seconds the sample queryable spent per query (decode, sample, encode), in fixed buckets, by
+    result (``batch`` or ``error``); the HTTP API's ``/metrics`` shows it as a histogram."""
+
+    BUCKETS = (0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5)
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._counts = {r: [0] * (len(self.BUCKETS) + 1) for r in ("batch", "error")}  # last: above all buckets
+        self._sums = {r: 0.0 for r in self._counts}
+
+    def observe(self, result: str, seconds: float) -> None:
+        with self._lock:
+            self._counts[result][bisect.bisect_left(self.BUCKETS, seconds)] += 1
+            self._sums[result] += seconds
+
+    def snapshot(self) -> dict[str, tuple[list[int], float]]:
+        """``{result: (per-bucket counts, the last one above every bucket), sum of seconds)}``."""
+        with self._lock:
+            return {r: (list(c), self._sums[r]) for r, c in self._counts.items()}
+
+
 class ReplayService:
     """Wires a ReplayCore to a zenoh session. ``start()`` returns at once; ``stop()`` joins."""
 
@@ -45,6 +69,22 @@ class ReplayService:
         self.stop_event = threading.Event()
         self._threads: list[threading.Thread] = []
         self._checkpoint_lock = threading.Lock()  # one checkpoint at a time (periodic vs final)
+        # On the core, like http_url: the HTTP API (which gets only the core) reads it for /metrics.
+        self.sample_latency = core.sample_latency = SampleLatency()
+
+    @staticmethod
+    def info_of(core: ReplayCore, run_id: str | None) -> dict:
+        """The body of ``replay/info`` (and HTTP ``/info``): what a client needs to build TRANSITIONS."""
+        schema = core.schema
+        return {"wire_version": wire.WIRE_VERSION, "obs_shape": list(schema.obs_shape), "obs_dtype": schema.obs_dtype,
+                "n_actions": schema.n_actions, "run_id": run_id, "mode": core.mode, "http_url": core.http_url}
+
+    def _sample(self, payload: bytes) -> bytes:
+        start = time.perf_counter()
+        reply = self.core.handle_sample_query(payload)
+        result = "batch" if wire.peek_kind(reply) == wire.Kind.BATCH else "error"
+        self.sample_latency.observe(result, time.perf_counter() - start)
+        return reply
 
     def start(self) -> "ReplayService":
         sub = self.ingest_session.declare_subscriber(wire.transitions_wildcard(self.run_id),
@@ -66,10 +106,12 @@ class ReplayService:
         self._threads.append(flow)
         q = transport.serve_queries
         self._threads += [
-            q(self.session, wire.sample_key(self.run_id), self.core.handle_sample_query, self.stop_event, "replay-sample"),
+            q(self.session, wire.sample_key(self.run_id), self._sample, self.stop_event, "replay-sample"),
             q(self.session, wire.replay_stats_key(self.run_id), lambda _: wire.encode_json(self.core.stats()),
               self.stop_event, "replay-stats"),
             q(self.session, wire.replay_control_key(self.run_id), self._control, self.stop_event, "replay-control"),
+            q(self.session, wire.replay_info_key(self.run_id),
+              lambda _: wire.encode_json(self.info_of(self.core, self.run_id)), self.stop_event, "replay-info"),
         ]
         return self
 
@@ -251,12 +293,8 @@ class ReplayServer:
         if getattr(self, "_lock_fd", None) is not None:
             os.close(self._lock_fd)
             self._lock_fd = None
-        for session in self._sessions:
-            try:
-                session.close()
-            except Exception:  # noqa: BLE001 - closing twice, or a session already gone
-                pass
-        self._sessions = []
+        sessions, self._sessions = self._sessions, []
+        transport.close_sessions(sessions, timeout_s=10.0, who="replay-server")
 
 
 def run_replay_server(cfg: RunConfig, *, embedded_router: bool = False, ready_file: str | None = None) -> int:

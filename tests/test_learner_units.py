@@ -269,18 +269,22 @@ def test_apex_per_worker_epsilons():
 
 def test_policy_greedy_at_epsilon_zero():
     p = QPolicy((4,), 5, hidden=(8,), seed=0)
-    p.load(wire.decode_weights(to_wire(_net(hidden=(8,), obs=4, n=5, seed=4), 3, 2, 10)))
+    net = _net(hidden=(8,), obs=4, n=5, seed=4)
+    p.load(wire.decode_weights(to_wire(net, 3, 2, 10)))
     assert (p.version, p.phase) == (3, 2)
     obs = np.random.default_rng(0).normal(size=(64, 4)).astype(np.float32)
     with torch.no_grad():
-        expected = p.net(torch.as_tensor(obs)).argmax(dim=1).numpy()
+        expected = net(torch.as_tensor(obs)).argmax(dim=1).numpy()
     assert np.array_equal(p.act(obs, 0.0), expected)
     assert np.array_equal(p.greedy(obs), expected)
 
 
 def test_policy_uniform_at_epsilon_one():
     p = QPolicy((2,), 4, hidden=(8,), seed=1)
-    _set_constant_q(p.net, [0.0, 0.0, 9.0, 0.0])  # greedy is always action 2
+    net = _net(hidden=(8,), obs=2, n=4, seed=1)
+    with torch.no_grad():
+        _set_constant_q(net, [0.0, 0.0, 9.0, 0.0])  # greedy is always action 2
+    p.load_tensors({k: v.numpy() for k, v in net.state_dict().items()})
     obs = np.zeros((4000, 2), np.float32)
     actions = p.act(obs, 1.0)
     counts = np.bincount(actions, minlength=4)

@@ -167,3 +167,92 @@ def test_kill_9_loses_at_most_one_interval_and_restart_restores(tmp_path):
         assert meta["items"] == 600
     finally:
         group.stop_all()
+
+
+class _CopyHook:
+    """Stands in for the core's lock during a checkpoint: after ``after`` acquisitions (chunks
+    copied) it runs ``action`` once, outside the lock, as an insert racing the copy would."""
+
+    def __init__(self, lock, after: int, action):
+        self.lock, self.after, self.action, self.count = lock, after, action, 0
+
+    def __enter__(self):
+        self.count += 1
+        if self.count == self.after + 1:
+            self.action()
+        return self.lock.__enter__()
+
+    def __exit__(self, *exc):
+        return self.lock.__exit__(*exc)
+
+
+def test_a_batch_the_copy_caught_in_part_is_dropped_and_counted_on_restore(tmp_path, monkeypatch):
+    import laneshift.replay_server.checkpoint as ckpt
+
+    core = ReplayCore(ReplayConfig(capacity=100, min_size=1), SCHEMA)
+    for seq in range(4):  # rows 0-39
+        assert core.ingest(batch(seq)) is None
+    names = ckpt.COLUMNS
+    real = sum(getattr(core.online, n).dtype.itemsize * int(np.prod(getattr(core.online, n).shape[1:])) for n in names)
+    monkeypatch.setattr(ckpt, "CHUNK_BYTES", 8 * real)  # 8 rows a chunk
+    # Chunks: rows 0-7, 8-15, ..., 40-47 (the 6th), 48-55. Batch 4 (rows 40-49) arrives after the
+    # 6th chunk was copied: rows 48-49 of it are in the copy, rows 40-47 are not.
+    core._lock = _CopyHook(core._lock, after=6, action=lambda: core.ingest(batch(4)))
+    write_checkpoint(core, tmp_path / "ckpt")
+    fresh = ReplayCore(ReplayConfig(capacity=100, min_size=1), SCHEMA)
+    assert restore_checkpoint(fresh, tmp_path / "ckpt") == 40  # batch 4's two caught rows dropped
+    assert (assert_items_whole(fresh) == np.arange(40)).all()
+    state = fresh.actor_state("w0")
+    assert state == {"env_steps": 40, "next_seq": 4, "known": 1}  # resumes after the last whole batch
+    # The worker, not restarted, goes on with batch 5: batch 4's 10 items are counted as lost.
+    assert fresh.ingest(batch(5)) is None
+    assert fresh.actors["w0"]["lost_batches"] == 1 and fresh.actors["w0"]["lost_items"] == 10
+
+
+def test_a_batch_after_the_copy_is_counted_lost_not_hidden_by_later_stats(tmp_path, monkeypatch):
+    import laneshift.replay_server.checkpoint as ckpt
+
+    core = ReplayCore(ReplayConfig(capacity=100, min_size=1), SCHEMA)
+    for seq in range(6):  # rows 0-59
+        core.ingest(batch(seq))
+    for seq in range(6, 10):  # rows 60-99, then the ring is full
+        core.ingest(batch(seq))
+    monkeypatch.setattr(ckpt, "CHUNK_BYTES", 1)  # one row a chunk
+    # Batch 10 overwrites rows 0-9 after the copy passed them: not in the checkpoint, yet the
+    # stats read at the end name it (last_seq 10, env_steps 110).
+    core._lock = _CopyHook(core._lock, after=20, action=lambda: core.ingest(batch(10)))
+    write_checkpoint(core, tmp_path / "ckpt")
+    meta = json.loads((tmp_path / "ckpt" / "meta.json").read_text())
+    assert meta["actors"]["w0"]["last_seq"] == 10
+    fresh = ReplayCore(ReplayConfig(capacity=100, min_size=1), SCHEMA)
+    restore_checkpoint(fresh, tmp_path / "ckpt")
+    assert fresh.actor_state("w0") == {"env_steps": 100, "next_seq": 10, "known": 1}
+    fresh.ingest(batch(11))
+    assert fresh.actors["w0"]["lost_items"] == 10  # batch 10: counted
+
+
+def test_per_actor_state_is_bounded_and_idle_actors_are_evicted(monkeypatch):
+    import laneshift.replay_server.core as core_mod
+
+    monkeypatch.setattr(core_mod, "MAX_ACTORS", 4)
+    core = ReplayCore(ReplayConfig(capacity=1000, min_size=1, actor_idle_evict_s=60), SCHEMA)
+    clock = [1000.0]
+    monkeypatch.setattr(core_mod.time, "monotonic", lambda: clock[0])
+    for i in range(4):
+        assert core.ingest(batch(0, actor=f"a{i}")) is None
+        clock[0] += 1
+    assert core.ingest(batch(0, actor="new")) == "too_many_actors"  # nobody idle long enough
+    clock[0] += 60
+    core.ingest(batch(1, actor="a1"))  # a1 is busy again; a0 is the idle one
+    assert core.ingest(batch(0, actor="new")) is None
+    assert "a0" not in core.actors and len(core.actors) == 4
+    total = core.stats()["actors_total"]
+    assert total["evicted"] == 1 and total["stored"] == 60 and total["batches"] == 6  # nothing vanishes
+    assert core.actor_state("a0") == {"env_steps": 10, "next_seq": 1, "known": 1}
+    # a0 comes back: evicts the idle one, continues its own counts (no false loss)
+    clock[0] += 120
+    assert core.ingest(batch(1, actor="a0")) is None
+    assert core.actors["a0"]["batches"] == 2 and core.actors["a0"]["lost_batches"] == 0
+    total = core.stats()["actors_total"]
+    assert total["stored"] == 70 and total["batches"] == 7 and total["lost_items"] == 0
+    assert len(set(core._actor_index.values())) == 4  # row indices reused, never more than MAX_ACTORS

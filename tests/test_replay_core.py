@@ -591,7 +591,7 @@ def test_stats_shape_is_json_and_complete():
     s = core.stats()
     assert set(s) == {"mode", "phase", "http_url", "uptime_s", "actors_total", "tables", "demo_share_buffer", "demo_share_recent_samples",
                       "sampled_rows", "sampled_demo_rows", "requests", "rejected", "dropped", "actors", "rates",
-                      "rate_limiter", "checkpoint", "sampler"}
+                      "rate_limiter", "checkpoint", "sampler", "obs_shape", "obs_dtype", "n_actions"}
     assert s["tables"]["online"] == {"size": 300, "capacity": 900, "inserted": 300, "bytes": core.online.nbytes}
     assert s["tables"]["demo"]["sha256"] == "d" * 64
     # stats travel as a JSON message: it must encode and decode unchanged

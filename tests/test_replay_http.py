@@ -320,13 +320,16 @@ _LABEL = re.compile(r'([a-zA-Z_][a-zA-Z0-9_]*)="((?:[^"\\\n]|\\[\\"n])*)"')
 
 
 def parse_metrics(text: str) -> dict[tuple[str, tuple], float]:
-    """A strict reader of the text format 0.0.4 (what a Prometheus scrape needs)."""
+    """A strict reader of the text format 0.0.4 (what a Prometheus scrape needs). Labels come
+    back sorted by name; a histogram's ``_bucket`` / ``_sum`` / ``_count`` lines belong to its family."""
     assert text.endswith("\n")
     types, out = {}, {}
     for line in text.splitlines():
         if line.startswith("# TYPE "):
             _, _, name, kind = line.split(" ")
-            assert kind in ("counter", "gauge") and name not in types
+            assert kind in ("counter", "gauge", "histogram") and name not in types
+            assert name.startswith(("laneshift_replay_", "process_")), name
+            assert (kind == "counter") == name.endswith("_total"), f"{name} ({kind}): _total is for counters only"
             types[name] = kind
         elif line.startswith("# HELP "):
             assert len(line.split(" ", 3)) == 4
@@ -334,8 +337,9 @@ def parse_metrics(text: str) -> dict[tuple[str, tuple], float]:
             m = _SAMPLE.match(line)
             assert m, f"not a valid sample line: {line!r}"
             name = m.group(1)
-            assert name in types and name.startswith("laneshift_replay_"), name
-            labels = tuple(_LABEL.findall(m.group(3) or ""))
+            family = re.sub(r"_(bucket|sum|count)$", "", name)
+            assert name in types or types.get(family) == "histogram", name
+            labels = tuple(sorted(_LABEL.findall(m.group(3) or "")))
             assert (name, labels) not in out
             out[(name, labels)] = float(m.group(4))
     return out
@@ -361,15 +365,55 @@ def test_metrics_exposition_format_and_values():
     assert m[("laneshift_replay_rejected_total", (("reason", 'we\\"ird\\\\reason\\nx'),))] == 1
     assert m[("laneshift_replay_actor_buffer_items", (("actor", "w0"),))] == 70
     assert m[("laneshift_replay_actor_items_total", (("actor", "w1"),))] == 70
-    assert m[("laneshift_replay_demo_share", (("scope", "buffer"),))] == pytest.approx(100 / 240)
-    assert m[("laneshift_replay_demo_share", (("scope", "recent_samples"),))] == st_["demo_share_recent_samples"]
+    assert m[("laneshift_replay_demo_share_ratio", (("scope", "buffer"),))] == pytest.approx(100 / 240)
+    assert m[("laneshift_replay_demo_share_ratio", (("scope", "recent_samples"),))] == st_["demo_share_recent_samples"]
     assert 3 <= m[("laneshift_replay_checkpoint_age_seconds", ())] < 10
-    assert m[("laneshift_replay_info", (("mode", "retention"), ("demo_sha256", "d" * 64)))] == 1
+    assert m[("laneshift_replay_info", (("demo_sha256", "d" * 64), ("mode", "retention")))] == 1
     assert m[("laneshift_replay_sample_requests_total", (("result", "served"),))] == 1
+    assert m[("laneshift_replay_actor_env_steps_total", (("actor", "w1"),))] == 140
+    # Rates are Prometheus's job (rate() over these counters): no server-side per-second gauges.
+    assert not any(name.endswith("_per_second") for name, _ in m)
+    assert m[("process_resident_memory_bytes", ())] > 0 and m[("process_cpu_seconds_total", ())] >= 0
     # Before any checkpoint or ratio, those gauges are absent (their HELP / TYPE stay).
     text = client(make_core()).get("/metrics").text
     assert "\nlaneshift_replay_checkpoint_age_seconds" not in text and "TYPE laneshift_replay_checkpoint_age" in text
     parse_metrics(text)
+
+
+def test_metrics_sample_latency_histogram():
+    from laneshift.replay_server.service import SampleLatency
+
+    core = make_core()
+    text = client(core).get("/metrics").text  # no zenoh service: the histogram has no series yet
+    assert "# TYPE laneshift_replay_sample_duration_seconds histogram" in text
+    assert "laneshift_replay_sample_duration_seconds_count" not in text
+    core.sample_latency = latency = SampleLatency()
+    for seconds in (0.0004, 0.0005, 0.003, 0.2, 9.0):
+        latency.observe("batch", seconds)
+    latency.observe("error", 0.0001)
+    m = parse_metrics(client(core).get("/metrics").text)
+    name = "laneshift_replay_sample_duration_seconds"
+    buckets = {float(dict(labels)["le"]): v for (n, labels), v in m.items()
+               if n == name + "_bucket" and dict(labels)["result"] == "batch"}
+    assert buckets[0.0005] == 2 and buckets[0.0025] == 2 and buckets[0.005] == 3 and buckets[2.5] == 4
+    assert buckets[math.inf] == 5 == m[(name + "_count", (("result", "batch"),))]
+    assert m[(name + "_sum", (("result", "batch"),))] == pytest.approx(9.2039)
+    assert list(buckets.values()) == sorted(buckets.values())  # cumulative
+    assert m[(name + "_count", (("result", "error"),))] == 1
+
+
+# --------------------------------------------------------------------------- /info
+
+
+def test_info_says_what_transitions_must_look_like():
+    core = make_core("retention", demo=300, capacity=1000)
+    core.identity, core.http_url = {"run_id": "r1"}, "http://127.0.0.1:1"
+    body = client(core).get("/info").json()
+    assert body == {"wire_version": wire.WIRE_VERSION, "obs_shape": [3], "obs_dtype": "<f4", "n_actions": 5,
+                    "run_id": "r1", "mode": "retention", "http_url": "http://127.0.0.1:1"}
+    stats = client(core).get("/stats").json()  # the stats reply carries the same three
+    assert (stats["obs_shape"], stats["obs_dtype"], stats["n_actions"]) == ([3], "<f4", 5)
+    assert client(make_core()).get("/info").json()["run_id"] is None  # a core outside a server has no run
 
 
 # --------------------------------------------------------------------------- bad parameters, schema
@@ -420,7 +464,8 @@ _FUZZ_CLIENT = client(_FUZZ_CORE)
 
 @FUZZ
 @given(name=st.one_of(st.sampled_from(["online", "demo"]), st.text(max_size=10)), offset=_JUNK, limit=_JUNK,
-       include_obs=_JUNK, path=st.sampled_from(["/healthz", "/stats", "/demo", "/metrics", "/openapi.json", "items"]))
+       include_obs=_JUNK, path=st.sampled_from(["/healthz", "/stats", "/demo", "/info", "/metrics", "/openapi.json",
+                                                "items"]))
 def test_no_parameters_make_a_5xx(name, offset, limit, include_obs, path):
     params = {"offset": offset, "limit": limit, "include_obs": include_obs}
     url = f"/tables/{quote(name, safe='')}/items" if path == "items" else path
@@ -433,7 +478,7 @@ def test_no_parameters_make_a_5xx(name, offset, limit, include_obs, path):
 
 def test_openapi_schema_documents_the_endpoints():
     schema = client(make_core()).get("/openapi.json").json()
-    assert {"/healthz", "/stats", "/tables/{name}/items", "/demo", "/metrics"} <= set(schema["paths"])
+    assert {"/healthz", "/stats", "/tables/{name}/items", "/demo", "/info", "/metrics"} <= set(schema["paths"])
     params = {p["name"]: p for p in schema["paths"]["/tables/{name}/items"]["get"]["parameters"]}
     assert params["offset"]["schema"]["minimum"] == 0 and params["limit"]["schema"]["minimum"] == 1
     assert params["limit"]["schema"]["default"] == 10 and params["include_obs"]["schema"]["type"] == "boolean"

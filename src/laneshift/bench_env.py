@@ -22,6 +22,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from laneshift.progress import progress
+
 
 def register(subparsers: Any) -> None:
     """Add the ``env`` sub-command (the lead's cli calls this under ``laneshift bench``)."""
@@ -31,11 +33,13 @@ def register(subparsers: Any) -> None:
 
 
 def _add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--steps", type=int, default=600, help="random-action steps per env (default 600)")
-    p.add_argument("--seed", type=int, default=0)
+    from laneshift.cli import non_negative_int, positive_int
+
+    p.add_argument("--steps", type=positive_int, default=600, help="random-action steps per env (default 600)")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the envs and the random actions")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     p.add_argument("--baselines", action="store_true", help="also evaluate random / keep-lane / scripted policies")
-    p.add_argument("--episodes", type=int, default=100, help="episodes per baseline row (default 100)")
+    p.add_argument("--episodes", type=positive_int, default=100, help="episodes per baseline row (default 100)")
     p.add_argument(
         "--scenario",
         default="straight",
@@ -44,22 +48,27 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
-def measure(env: gym.Env, steps: int, seed: int) -> dict[str, float]:
-    """Random-action throughput of ``env`` over ``steps`` steps, resets included."""
+def measure(env: gym.Env, steps: int, seed: int, bar: Any = None) -> dict[str, float]:
+    """Random-action throughput of ``env`` over ``steps`` steps, resets included. ``bar``: a
+    progress bar moved every 100 steps (negligible next to a step)."""
     env.action_space.seed(seed)
     env.reset(seed=seed)
     episodes = 0
     t0 = time.perf_counter()
-    for _ in range(steps):
+    for i in range(steps):
         _, _, terminated, truncated, _ = env.step(env.action_space.sample())
         if terminated or truncated:
             episodes += 1
             env.reset()
+        if bar is not None and i % 100 == 99:
+            bar.update(100)
     wall = time.perf_counter() - t0
+    if bar is not None:
+        bar.update(steps % 100)
     return {"steps_per_s": steps / wall, "episodes": episodes, "wall_s": wall}
 
 
-def speed(steps: int, seed: int) -> dict[str, float]:
+def speed(steps: int, seed: int, bar: Any = None) -> dict[str, float]:
     """Side-by-side speed of laneshift's straight scenario and highway-fast-v0."""
     import highway_env  # noqa: F401  (registers highway-fast-v0)
 
@@ -74,9 +83,9 @@ def speed(steps: int, seed: int) -> dict[str, float]:
     for e in (ours, ours_gray, hw):
         e.reset(seed=seed)
         e.step(e.action_space.sample())
-    a = measure(ours, steps, seed)
-    g = measure(ours_gray, steps, seed)
-    b = measure(hw, steps, seed)
+    a = measure(ours, steps, seed, bar)
+    g = measure(ours_gray, steps, seed, bar)
+    b = measure(hw, steps, seed, bar)
     for e in (ours, ours_gray, hw):
         e.close()
     return {
@@ -94,7 +103,8 @@ def speed(steps: int, seed: int) -> dict[str, float]:
 
 
 def evaluate(
-    policy: str, initial_lane: str, episodes: int, seed: int, max_steps: int = 300, scenario: str = "straight"
+    policy: str, initial_lane: str, episodes: int, seed: int, max_steps: int = 300, scenario: str = "straight",
+    bar: Any = None,
 ) -> dict[str, Any]:
     """Survival / achievement of one baseline policy on ``scenario`` over ``max_steps``-step episodes."""
     from laneshift.actors import envs as ls_envs
@@ -120,6 +130,8 @@ def evaluate(
         achieved += ok and info["on_target_lane"]
         returns.append(total)
         lengths.append(info["steps"])
+        if bar is not None:
+            bar.update()
     env.close()
     return {
         "policy": policy,
@@ -132,15 +144,15 @@ def evaluate(
     }
 
 
-def baselines(episodes: int, seed: int, scenario: str = "straight") -> list[dict[str, Any]]:
+def baselines(episodes: int, seed: int, scenario: str = "straight", bar: Any = None) -> list[dict[str, Any]]:
     return [
-        evaluate(policy, lane, episodes, seed, scenario=scenario)
+        evaluate(policy, lane, episodes, seed, scenario=scenario, bar=bar)
         for lane in ("random", "non-target")
         for policy in ("random", "keep-lane", "scripted")
     ]
 
 
-def lka_expert(episodes: int, seed: int) -> dict[str, Any]:
+def lka_expert(episodes: int, seed: int, bar: Any = None) -> dict[str, Any]:
     """LKAExpert on LaneKeepingAssist-v0: survival (|e1| <= 1 m for 150 steps) and returns, over
     random resets and from MATLAB's demo start (e1 = -0.4 m, e2 = 0.2 rad)."""
     from laneshift.actors import envs as ls_envs
@@ -157,6 +169,8 @@ def lka_expert(episodes: int, seed: int) -> dict[str, Any]:
             total += reward
             e1.append(float(obs[0]))
             if terminated or truncated:
+                if bar is not None:
+                    bar.update()
                 return total, not terminated, e1
 
     runs = [episode(seed=seed * 100_003 + ep) for ep in range(episodes)]
@@ -174,11 +188,14 @@ def lka_expert(episodes: int, seed: int) -> dict[str, Any]:
 def run(args: argparse.Namespace) -> int:
     if args.steps < 1 or args.episodes < 1:
         raise SystemExit("--steps and --episodes must be >= 1")
-    result: dict[str, Any] = speed(args.steps, args.seed)
+    with progress(total=3 * args.steps, desc="bench env speed", unit="step") as bar:
+        result: dict[str, Any] = speed(args.steps, args.seed, bar)
     if args.baselines:
         result["baselines_scenario"] = args.scenario
-        result["baselines"] = baselines(args.episodes, args.seed, args.scenario)
-        result["lka_expert"] = lka_expert(args.episodes, args.seed)
+        # 6 rows of episodes, then the LKA expert's random resets and its one demo episode.
+        with progress(total=7 * args.episodes + 1, desc="bench env baselines", unit="episode") as bar:
+            result["baselines"] = baselines(args.episodes, args.seed, args.scenario, bar)
+            result["lka_expert"] = lka_expert(args.episodes, args.seed, bar)
     if args.json:
         print(json.dumps(result))
         return 0

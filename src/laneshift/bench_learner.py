@@ -6,11 +6,18 @@ Two implementations of one Double DQN update are timed side by side, alternating
 - **DoubleDQN.update** (``learner/dqn.py``): the learner's own update, fed exactly as the learner
   feeds it: a ``wire.SampledBatch`` of ``learner.prefetch`` batches, encoded and decoded through the
   wire (``wire.encode_batch`` / ``wire.decode_batch``, once, outside the timing) and split per update
-  with the learner loop's ``_split``; numpy in, so every update copies its batch to the device and
-  reads its metrics and |TD error| back (``float(...)``, ``.cpu()``): what the learner pays.
-- **bare torch**: the same network (``build_q_network``), batch, Adam, Huber loss, global-norm
-  gradient clipping, Double DQN target and hard target sync, with the batches already on the
-  device and nothing read back: an upper bound for this network on this device.
+  with the learner loop's ``_split``; numpy in, so every update turns its batch into tensors (shared
+  on CPU, copied to a GPU) and computes its metrics and |TD error|; like the learner loop, it reads
+  none of them back per update (the loop reads the metrics once per log interval, and the |TD
+  errors| once per sample reply only from a prioritized replay; this batch is uniform).
+- **bare torch**: the same network (``build_q_network``), batch, Adam (fused, as the learner's),
+  Huber loss, global-norm gradient
+  clipping, Double DQN target and hard target sync, with the batches already on the device and
+  nothing read back: the plain-torch figure the learner is measured against.
+
+Each measurement also records the process's CPU time (``updates_per_cpu_s``): with one torch
+thread on a CPU shared with other work it is steadier than wall time, and the table shows both
+ratios.
 
 Cases: the vector default (MLP, obs (82,) float32, hidden (256, 256), 9 actions, batch 256) and
 the Nature CNN that grayscale observations (4 x 100 x 100 uint8) select, at batch 32 and 64.
@@ -35,10 +42,11 @@ from dataclasses import dataclass
 from typing import Any, Callable
 
 import numpy as np
-import torch
-import torch.nn.functional as F
 
 from laneshift import wire
+
+# torch is imported inside the functions that measure: every `laneshift` command builds its parser
+# with this module's register(), and a module-level import cost each of them ~2 s.
 from laneshift.config import LearnerConfig
 
 N_ACTIONS = 9
@@ -116,8 +124,8 @@ def _split(batch: wire.SampledBatch) -> list[dict[str, np.ndarray]]:
         from laneshift.learner.loop import _split as learner_split
     except ImportError:  # same fields, same split: learner.loop.UPDATE_FIELDS / _split
         fields = ("obs", "action", "reward", "next_obs", "terminated", "steps", "weight", "is_demo")
-        parts = {k: np.split(getattr(batch, k), batch.num_batches) for k in fields}
-        return [{k: v[i] for k, v in parts.items()} for i in range(batch.num_batches)]
+        rows = len(batch.action) // batch.num_batches
+        return [{k: getattr(batch, k)[i * rows:(i + 1) * rows] for k in fields} for i in range(batch.num_batches)]
     return learner_split(batch)
 
 
@@ -161,12 +169,15 @@ def learner_step(case: Case, cfg: LearnerConfig) -> tuple[Callable[[], None], to
 
 def bare_step(case: Case, cfg: LearnerConfig, device: torch.device) -> Callable[[], None]:
     """The same update in plain torch, batches resident on the device, nothing read back."""
+    import torch
+    import torch.nn.functional as F
     from laneshift.learner.networks import build_q_network
 
     torch.manual_seed(cfg.seed)
     online = build_q_network(case.obs_shape, N_ACTIONS, cfg.hidden, cfg.dueling).to(device)
     target = copy.deepcopy(online).requires_grad_(False)
-    opt = torch.optim.Adam(online.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    # The learner's optimizer (fused Adam, learner/dqn.py): "the same optimizer" is the fair bar.
+    opt = torch.optim.Adam(online.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay, fused=device.type in ("cpu", "cuda"))
     parts = []
     for p in _split(sampled_batch(case, cfg.prefetch, seed=1)):
         parts.append({
@@ -201,6 +212,7 @@ def bare_step(case: Case, cfg: LearnerConfig, device: torch.device) -> Callable[
 
 
 def _sync(device: torch.device) -> None:
+    import torch
     if device.type == "cuda":
         torch.cuda.synchronize(device)
 
@@ -208,17 +220,19 @@ def _sync(device: torch.device) -> None:
 def measure(step: Callable[[], None], seconds: float, device: torch.device, min_updates: int = 1) -> dict:
     """Updates until ``seconds`` passed (at least ``min_updates``); the clock stops after a sync."""
     _sync(device)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     n = 0
     while n < min_updates or time.perf_counter() - t0 < seconds:
         step()
         n += 1
     _sync(device)
-    wall = time.perf_counter() - t0
-    return {"updates": n, "wall_s": wall, "updates_per_s": n / wall}
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    return {"updates": n, "wall_s": wall, "updates_per_s": n / wall, "cpu_s": cpu,
+            "updates_per_cpu_s": n / cpu if cpu > 0 else None}
 
 
 def device_name(device: torch.device) -> str:
+    import torch
     if device.type == "cuda":
         return torch.cuda.get_device_name(device)
     try:
@@ -234,6 +248,7 @@ def device_name(device: torch.device) -> str:
 def bench(device: str = "auto", *, seconds: float = 3.0, rounds: int = 2, warmup: float = 0.5, threads: int = 1,
           cases: list[Case] | tuple[Case, ...] = CASES, log=None) -> dict:
     """Every figure of the benchmark as one JSON-ready dict."""
+    import torch
     from laneshift.learner.dqn import resolve_device
 
     dev = resolve_device(device)
@@ -264,6 +279,11 @@ def bench(device: str = "auto", *, seconds: float = 3.0, rounds: int = 2, warmup
                 row[name] = {"updates_per_s": statistics.fmean(rates), "min": min(rates), "max": max(rates),
                              "rows_per_s": statistics.fmean(rates) * case.batch, "rounds": runs}
             row["learner_over_bare"] = row["learner"]["updates_per_s"] / row["bare"]["updates_per_s"]
+            # The same ratio from CPU time (all rounds pooled): steadier than wall time on a shared CPU.
+            cpu = {k: sum(r["cpu_s"] for r in runs) for k, runs in per_round.items()}
+            ups = {k: sum(r["updates"] for r in runs) for k, runs in per_round.items()}
+            row["learner_over_bare_cpu"] = (ups["learner"] / cpu["learner"]) / (ups["bare"] / cpu["bare"]) \
+                if cpu["learner"] > 0 and cpu["bare"] > 0 else None
             out_cases.append(row)
             del impls, online
             if dev.type == "cuda":
@@ -281,14 +301,16 @@ def format_result(r: dict) -> str:
     head = (f"laneshift bench learner: {r['device']} ({r['device_name']}), torch {r['torch']}, "
             f"{r['threads']} thread(s), {r['rounds']} rounds x {r['seconds']:g} s alternating, updates/s "
             f"(mean [min..max])")
-    cols = f"{'case':<10} {'network':<12} {'params':>9} {'batch':>5}  {'DoubleDQN.update':>24}  {'bare torch':>24}  {'ratio':>5}"
+    cols = (f"{'case':<10} {'network':<12} {'params':>9} {'batch':>5}  {'DoubleDQN.update':>24}  {'bare torch':>24}  "
+            f"{'ratio':>5}  {'cpu ratio':>9}")
     lines = [head, cols, "-" * len(cols)]
     for c in r["cases"]:
         cells = [f"{c[k]['updates_per_s']:.1f} [{c[k]['min']:.1f}..{c[k]['max']:.1f}]" for k in ("learner", "bare")]
+        cpu = c.get("learner_over_bare_cpu")
         lines.append(f"{c['name']:<10} {c['network']:<12} {c['params']:>9,} {c['batch']:>5}  {cells[0]:>24}  "
-                     f"{cells[1]:>24}  {c['learner_over_bare']:>5.2f}")
-    lines.append("ratio = DoubleDQN.update / bare torch (numpy batch copied in and metrics read back, vs resident "
-                 "tensors and nothing read back)")
+                     f"{cells[1]:>24}  {c['learner_over_bare']:>5.2f}  {cpu if cpu is None else format(cpu, '.2f'):>9}")
+    lines.append("ratio = DoubleDQN.update / bare torch in updates/s (numpy batch in, as the learner gets it, vs "
+                 "resident tensors); cpu ratio = the same in updates per CPU-second of this process")
     return "\n".join(lines)
 
 

@@ -45,6 +45,8 @@ import numpy as np
 
 from laneshift import transport, wire
 from laneshift.config import ReplayConfig, TransportConfig
+from laneshift.progress import progress
+from laneshift.progress import write as progress_write
 
 TARGET_INGEST_VECTOR_PER_S = 200_000
 TARGET_SAMPLE_P99_MS = 5.0
@@ -306,9 +308,10 @@ class _Bench:
         self.n_pub = 0
         self.t0 = time.monotonic()
         self.live: set[str] = set()  # children that must be running now (stopped ones are removed)
+        self.bar = progress(total=0, desc="bench replay", unit="phase", disable=True)  # bench() sets the real one
 
     def say(self, msg: str) -> None:
-        print(f"[bench replay {time.monotonic() - self.t0:5.1f}s] {msg}", file=self.log, flush=True)
+        progress_write(f"[bench replay {time.monotonic() - self.t0:5.1f}s] {msg}", file=self.log)
 
     # --- processes
 
@@ -472,11 +475,16 @@ class _Bench:
                 latency = self.sample_latency(run_id, schema, a.duration, warmup_n=3, min_n=5)
             elif fill_to is not None:
                 deadline = time.monotonic() + FILL_TIMEOUT_S
-                while self.stats(run_id)["tables"]["online"]["inserted"] < fill_to:
-                    if time.monotonic() > deadline:
-                        raise BenchError(f"the table did not take {fill_to:,} items in {FILL_TIMEOUT_S} s")
-                    self.check_alive()
-                    time.sleep(0.05)
+                start = s0["tables"]["online"]["inserted"]
+                with progress(total=fill_to, desc=f"fill {run_id}", unit="transition", unit_scale=True,
+                              leave=False) as fill:
+                    while (inserted := self.stats(run_id)["tables"]["online"]["inserted"]) < fill_to:
+                        if time.monotonic() > deadline:
+                            raise BenchError(f"the table did not take {fill_to:,} items in {FILL_TIMEOUT_S} s")
+                        fill.update(max(0, min(inserted - start, fill_to) - fill.n))
+                        self.check_alive()
+                        time.sleep(0.05)
+                    fill.update(max(0, fill_to - fill.n))
             else:
                 time.sleep(a.duration)
             s1 = self.stats(run_id)
@@ -560,6 +568,11 @@ def bench(args: argparse.Namespace, log: TextIO = sys.stderr) -> dict:
 
     in_main = threading.current_thread() is threading.main_thread()
     old_term = signal.signal(signal.SIGTERM, on_term) if in_main else None
+    scaling = [2] + [n for n in args.actors if n != 2]
+    # Phases: vector fill, one window per actor count, idle sampling, sampling under saturating
+    # (and paced) ingest, grayscale fill and ingest.
+    phases = 1 + len(scaling) + 2 + (args.paced_rate > 0) + 2
+    b.bar = progress(total=phases, desc="bench replay", unit="phase")
     try:
         b.start_router()
         b.session = transport.open_session(TransportConfig(router=b.endpoint))
@@ -579,28 +592,33 @@ def bench(args: argparse.Namespace, log: TextIO = sys.stderr) -> dict:
         result["vector_obs"] = {"shape": list(vec.obs_shape), "dtype": vec.obs_dtype}
         b.say("vector: first fill of the table with 2 actors (fresh memory pages)")
         result["fill_vector"] = b.ingest("benchvec", vec, "vf", 2, fill_to=args.capacity_vector)
+        b.bar.update()
         rows: dict[int, dict] = {}
-        for n in [2] + [n for n in args.actors if n != 2]:
+        for n in scaling:
             b.say(f"vector: ingest with {n} actors for {args.duration:g} s")
             rows[n] = b.ingest("benchvec", vec, f"v{n}", n)
             b.say(f"  {rows[n]['ingest_per_s']:,.0f} transitions/s, cores {rows[n]['cores']}")
+            b.bar.update()
         head = rows[2]
         result["ingest_vector_per_s"] = head["ingest_per_s"]
         result["ingest_vector"] = head
         result["actor_scaling"] = [rows[n] for n in args.actors]
         b.say(f"vector: sample latency, batch {SAMPLE_BATCH}, idle server, {args.duration:g} s")
         idle = b.sample_latency("benchvec", vec, args.duration)
+        b.bar.update()
         result["sample_p50_ms"], result["sample_p99_ms"] = idle["p50_ms"], idle["p99_ms"]
         result["sample_idle"] = idle
         b.say(f"vector: sample latency while 2 actors insert as fast as they can, {args.duration:g} s")
         loaded = b.ingest("benchvec", vec, "vs", 2, sample_during=True)
         result["sample_under_saturating_ingest"] = {**loaded.pop("sample"), "ingest_meanwhile": loaded}
+        b.bar.update()
         if args.paced_rate > 0:
             b.say(f"vector: sample latency while 2 actors insert {args.paced_rate:,.0f} transitions/s, "
                   f"{args.duration:g} s")
             paced = b.ingest("benchvec", vec, "vp", 2, sample_during=True, rate=args.paced_rate)
             result["sample_under_paced_ingest"] = {**paced.pop("sample"), "offered_per_s": args.paced_rate,
                                                    "ingest_meanwhile": paced}
+            b.bar.update()
         st = b.stats("benchvec")
         online = st["tables"]["online"]
         result["bytes_per_transition_vector"] = online["bytes"] / online["capacity"]
@@ -615,8 +633,10 @@ def bench(args: argparse.Namespace, log: TextIO = sys.stderr) -> dict:
         result["grayscale_obs"] = {"shape": list(gray.obs_shape), "dtype": gray.obs_dtype}
         b.say("grayscale: first fill of the table with 2 actors (fresh memory pages)")
         result["fill_grayscale"] = b.ingest("benchgray", gray, "gf", 2, fill_to=args.capacity_grayscale)
+        b.bar.update()
         b.say(f"grayscale: ingest with 2 actors for {args.duration:g} s")
         g = b.ingest("benchgray", gray, "g2", 2)
+        b.bar.update()
         result["ingest_grayscale_per_s"] = g["ingest_per_s"]
         result["ingest_grayscale"] = g
         online = b.stats("benchgray")["tables"]["online"]
@@ -629,6 +649,7 @@ def bench(args: argparse.Namespace, log: TextIO = sys.stderr) -> dict:
         ok = True
         return result
     finally:
+        b.bar.close()
         if b.session is not None:
             b.session.close()
         for name in ("benchvec", "benchgray"):

@@ -14,10 +14,12 @@ from __future__ import annotations
 import argparse
 import json
 import shutil
+import sys
 from pathlib import Path
 
-from .config import EnvConfig, load_run_config
-from .evaluate import evaluate_lanes, load_checkpoint_policy
+from .config import ConfigError, EnvConfig, load_run_config
+from .evaluate import INITIAL_LANES, evaluate_lanes, load_checkpoint_policy
+from .progress import progress
 
 
 def kept_checkpoints(run_dir: str | Path) -> list[Path]:
@@ -28,14 +30,17 @@ def kept_checkpoints(run_dir: str | Path) -> list[Path]:
 
 
 def evaluate_checkpoints(run_dir: str | Path, env: EnvConfig, episodes: int, seed: int,
-                         initial_lanes: tuple[str, ...] = ("random",)) -> list[dict]:
+                         initial_lanes: tuple[str, ...] = ("random",), show_progress: bool = False) -> list[dict]:
+    """One row per kept checkpoint; ``show_progress``: progress bars on stderr."""
     rows = []
-    for path in kept_checkpoints(run_dir):
+    for path in progress(kept_checkpoints(run_dir), desc="checkpoints", unit="checkpoint",
+                         disable=not show_progress):
         ckpt = load_checkpoint_policy(path)
         meta, greedy = ckpt.meta, ckpt.greedy()
         row = {"checkpoint": path.name, "updates": int(meta.get("updates", 0)),
                "env_steps": int(meta.get("env_steps", 0)), "elapsed_s": float(meta.get("elapsed_s", 0.0))}
-        for lane, r in evaluate_lanes(lambda _env: greedy, env, episodes, seed, initial_lanes).items():
+        for lane, r in evaluate_lanes(lambda _env: greedy, env, episodes, seed, initial_lanes,
+                                      progress=f"eval {path.name}" if show_progress else None).items():
             row[lane] = {k: r[k] for k in ("survival_rate", "achievement_rate", "survival_ci95",
                                            "achievement_ci95", "return_mean") if k in r}  # LKA: no achievement
         rows.append(row)
@@ -81,11 +86,13 @@ def render(rows: list[dict], lanes: tuple[str, ...]) -> str:
 
 def _run(args: argparse.Namespace) -> int:
     run_dir = Path(args.run_dir)
+    if not (run_dir / "config.yaml").is_file():
+        raise ConfigError(f"--run-dir {run_dir}: no run there (no config.yaml)")
     cfg = load_run_config(run_dir / "config.yaml")
-    lanes = tuple(x for x in args.initial_lanes.split(",") if x)
-    rows = evaluate_checkpoints(run_dir, cfg.env, args.episodes, args.seed, lanes)
+    lanes = tuple(dict.fromkeys(args.initial_lanes))
+    rows = evaluate_checkpoints(run_dir, cfg.env, args.episodes, args.seed, lanes, show_progress=True)
     if not rows:
-        print(f"no checkpoints in {run_dir / 'checkpoints'}")
+        print(f"laneshift experiment checkpoints: no checkpoints in {run_dir / 'checkpoints'}", file=sys.stderr)
         return 1
     best = select_best(rows, lanes)
     out = {"run_dir": str(run_dir), "episodes": args.episodes, "seed": args.seed, "rows": rows,
@@ -105,12 +112,22 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _lane(text: str) -> str:
+    if text not in INITIAL_LANES:
+        raise ValueError(text)
+    return text
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from .cli import comma_list, non_negative_int, positive_int
+
     p = subparsers.add_parser("checkpoints", help="greedy scores of every kept checkpoint of a run")
-    p.add_argument("--run-dir", required=True)
-    p.add_argument("--episodes", type=int, default=50, help="greedy episodes per checkpoint and initial lane")
-    p.add_argument("--initial-lanes", default="random,non-target")
-    p.add_argument("--seed", type=int, default=200_000, help="evaluation episode seeds (not the test seeds)")
+    p.add_argument("--run-dir", required=True, help="a run trained with --set learner.keep_checkpoints=true")
+    p.add_argument("--episodes", type=positive_int, default=50, help="greedy episodes per checkpoint and initial lane")
+    p.add_argument("--initial-lanes", type=comma_list(_lane, "initial lanes (random, non-target)"),
+                   default=list(INITIAL_LANES), help="comma-separated initial-lane settings to score")
+    p.add_argument("--seed", type=non_negative_int, default=200_000,
+                   help="evaluation episode seeds (not the test seeds)")
     p.add_argument("--copy-best", metavar="PATH", help="copy the validation-selected checkpoint (see select_best) to PATH")
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
     p.set_defaults(func=_run)

@@ -1,5 +1,7 @@
-"""The ``laneshift`` command. ``laneshift --help`` lists the subcommands.
+"""laneshift: distributed Double DQN for lane changes (Ray env workers, a zenoh replay server
+holding human/scripted demonstrations, a torch learner).
 
+examples:
     laneshift train --local --workers 2 --scenario straight --mode rehearsal --env-steps 20000 --run-dir runs/demo
     laneshift replay-server --config runs/demo/config.yaml
     laneshift learner --config runs/demo/config.yaml
@@ -7,6 +9,10 @@
     laneshift eval --checkpoint runs/demo/checkpoints/final.safetensors --scenario straight --episodes 200
     laneshift replay inspect --router tcp/127.0.0.1:7447 --run-id run
     laneshift bench env
+
+`laneshift COMMAND --help` lists a command's options with their defaults. Long commands report
+progress on stderr (a bar on a terminal, a line every 10 s otherwise; LANESHIFT_PROGRESS=0: none).
+Bad input exits with code 2 and one line saying what is wrong.
 """
 
 from __future__ import annotations
@@ -15,15 +21,125 @@ import argparse
 import json
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from .config import ConfigError, RunConfig, load_run_config
+
+# ---------------------------------------------------------------------------- parser pieces
+
+
+class HelpFormatter(argparse.HelpFormatter):
+    """Every option's default shown after its help, unless the help already says it or there is
+    none to show (None, an empty list, an on/off flag). A description with indented lines (examples)
+    is kept as written; others are wrapped."""
+
+    def _fill_text(self, text: str, width: int, indent: str) -> str:
+        if "\n    " in text:
+            return "".join(indent + line for line in text.splitlines(keepends=True))
+        return super()._fill_text(text, width, indent)
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        default = action.default
+        empty = default is None or default is argparse.SUPPRESS or (
+            isinstance(default, (str, list, tuple)) and not default)
+        if not action.option_strings or action.nargs == 0 or "default" in text.lower() or empty:
+            return text
+        shown = ",".join(map(str, default)) if isinstance(default, (list, tuple)) else "%(default)s"
+        return f"{text} (default: {shown})"
+
+
+class Parser(argparse.ArgumentParser):
+    """The laneshift parser (its sub-parsers are of this class too): defaults in --help, and a
+    usage error as one line on stderr, exit code 2."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)
+
+    def error(self, message: str) -> "NoReturn":  # type: ignore[override]
+        self.exit(2, f"{self.prog}: {message} (see {self.prog} --help)\n")
+
+
+def positive_int(text: str) -> int:
+    """argparse type: an integer >= 1."""
+    return _checked(int, text, lambda v: v >= 1, "an integer >= 1")
+
+
+def non_negative_int(text: str) -> int:
+    """argparse type: an integer >= 0."""
+    return _checked(int, text, lambda v: v >= 0, "an integer >= 0")
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a number > 0."""
+    return _checked(float, text, lambda v: v > 0 and v != float("inf"), "a number > 0")
+
+
+def non_negative_float(text: str) -> float:
+    """argparse type: a number >= 0."""
+    return _checked(float, text, lambda v: 0 <= v < float("inf"), "a number >= 0")
+
+
+def fraction(text: str) -> float:
+    """argparse type: a number in [0, 1]."""
+    return _checked(float, text, lambda v: 0.0 <= v <= 1.0, "a number from 0 to 1")
+
+
+def _checked(kind: type, text: str, ok: Any, what: str) -> Any:
+    try:
+        value = kind(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+    if not ok(value):
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}")
+    return value
+
+
+def comma_list(kind: Any, what: str) -> Any:
+    """argparse type: a non-empty comma-separated list, each item through ``kind`` (a type or an
+    argparse type function)."""
+
+    def parse(text: str) -> list:
+        items = [item.strip() for item in text.split(",") if item.strip()]
+        if not items:
+            raise argparse.ArgumentTypeError(f"expected a comma-separated list of {what}, got {text!r}")
+        try:
+            return [kind(item) for item in items]
+        except (ValueError, argparse.ArgumentTypeError):
+            raise argparse.ArgumentTypeError(f"expected a comma-separated list of {what}, got {text!r}") from None
+
+    parse.__name__ = f"list of {what}"
+    return parse
+
+
+def endpoint(text: str) -> str:
+    """argparse type: a zenoh endpoint, PROTOCOL/ADDRESS (tcp/127.0.0.1:7447)."""
+    proto, sep, address = text.partition("/")
+    if not sep or not proto.isalnum() or not address:
+        raise argparse.ArgumentTypeError(f"expected a zenoh endpoint like tcp/127.0.0.1:7447, got {text!r}")
+    return text
+
+
+def parse_set(items: list[str]) -> dict[str, str]:
+    """``--set SECTION.FIELD=VALUE`` items as overrides; a malformed one is a ConfigError."""
+    out: dict[str, str] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigError(f"--set {item!r}: write SECTION.FIELD=VALUE, e.g. --set learner.lr=1e-4")
+        out[key.strip()] = value
+    return out
+
+
+def add_set_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
+                   help="override any config field, e.g. --set learner.lr=1e-4 (repeatable)")
 
 
 def _add_config_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", help="YAML/TOML/JSON file with sections env, actor, replay, learner, transport, train")
-    p.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
-                   help="override any config field, e.g. --set learner.lr=1e-4 (repeatable)")
+    add_set_arg(p)
 
 
 def _config_from(args: argparse.Namespace, shortcuts: dict[str, Any] | None = None,
@@ -31,11 +147,7 @@ def _config_from(args: argparse.Namespace, shortcuts: dict[str, Any] | None = No
     """``--config`` file < ``preset`` (a named method's settings) < flag shortcuts < ``--set``."""
     overrides: dict[str, Any] = dict(preset or {})
     overrides.update({k: v for k, v in (shortcuts or {}).items() if v is not None})
-    for item in args.set:
-        key, sep, value = item.partition("=")
-        if not sep:
-            raise ConfigError(f"--set {item!r}: write SECTION.FIELD=VALUE")
-        overrides[key.strip()] = value
+    overrides.update(parse_set(args.set))
     return load_run_config(args.config, overrides, base=base)
 
 
@@ -89,7 +201,7 @@ def _add_train(sub: argparse._SubParsersAction) -> None:
     where.add_argument("--cluster", metavar="ADDRESS",
                        help="a running Ray cluster: auto (RAY_ADDRESS or this node's cluster), HOST:PORT, "
                             "or ray://HOST:10001")
-    p.add_argument("--workers", type=int, help="env workers (Ray actors)")
+    p.add_argument("--workers", type=positive_int, help="env workers (Ray actors)")
     p.add_argument("--scenario", help="straight | merge | curve | roundabout | lka")
     p.add_argument("--mode", choices=["none", "retention", "rehearsal", "dqfd"],
                    help="how demos are used (the paper's three, or dqfd: pre-training then retention)")
@@ -98,7 +210,8 @@ def _add_train(sub: argparse._SubParsersAction) -> None:
                         "dqfd, dqfd-bc); --mode and --set win over it")
     p.add_argument("--parallel", choices=["async", "sync"], help="MATLAB parallel training mode")
     p.add_argument("--env-steps", help="total env-step budget over all workers")
-    p.add_argument("--observation", choices=["vector", "grayscale"])
+    p.add_argument("--observation", choices=["vector", "grayscale"],
+                   help="what the network sees: a feature vector or stacked grayscale frames")
     p.add_argument("--demos", help="demo shard dir(s), comma separated (default: scripted, generated if absent)")
     p.add_argument("--run-dir", help="where checkpoints, logs, TensorBoard files and config go")
     p.add_argument("--run-id", help="zenoh key namespace (laneshift/<run-id>/...)")
@@ -138,14 +251,15 @@ def _add_services(sub: argparse._SubParsersAction) -> None:
     _add_config_args(p)
     p.add_argument("--embedded-router", action="store_true", help="be the zenoh router too (listen on transport.router)")
     p.add_argument("--ready-file", help="write this file once serving (used by the launcher)")
-    p.add_argument("--http-port", type=int, help="serve the HTTP inspection API on this port (0 = a free one)")
+    p.add_argument("--http-port", type=non_negative_int,
+                   help="serve the HTTP inspection API on this port (0 = a free one)")
     p.add_argument("--http-host", help="bind address of the HTTP API (default 127.0.0.1: loopback only)")
     p.set_defaults(func=_replay_server)
     p = sub.add_parser("learner", help="run the learner process")
     _add_config_args(p)
     p.set_defaults(func=_learner)
     p = sub.add_parser("router", help="run a zenoh router for the other processes")
-    p.add_argument("--listen", default="tcp/127.0.0.1:7447", help="zenoh endpoint to listen on")
+    p.add_argument("--listen", type=endpoint, default="tcp/127.0.0.1:7447", help="zenoh endpoint to listen on")
     p.set_defaults(func=_router)
 
 
@@ -158,7 +272,8 @@ def _eval(args: argparse.Namespace) -> int:
     cfg = _config_from(args, {"env.scenario": args.scenario, "env.initial_lane": args.initial_lane,
                               "env.max_steps": args.max_steps, "env.observation": args.observation})
     try:
-        result = evaluate_checkpoint(args.checkpoint, cfg.env, episodes=args.episodes, seed=args.seed)
+        result = evaluate_checkpoint(args.checkpoint, cfg.env, episodes=args.episodes, seed=args.seed,
+                                     progress="eval")
         if args.demo_agreement:
             from laneshift.evaluate import demo_agreement
 
@@ -178,43 +293,69 @@ def _eval(args: argparse.Namespace) -> int:
 
 
 def _replay_inspect(args: argparse.Namespace) -> int:
+    from laneshift import transport
+    from laneshift.config import TransportConfig
     from laneshift.replay_server.inspect import inspect_main
 
+    # inspect_main's session waits for a router forever (what services want): first make sure one
+    # answers, giving up after --connect-timeout with the endpoint named.
+    try:
+        transport.open_session(TransportConfig(router=args.router, run_id=args.run_id),
+                               connect_timeout_s=args.connect_timeout).close()
+    except ConnectionError as exc:
+        print(f"laneshift replay inspect: {exc}", file=sys.stderr)
+        return 1
     return inspect_main(args)
 
 
 def _add_inspection(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("eval", help="greedy evaluation of a checkpoint (survival / achievement rates)")
-    p.add_argument("--checkpoint", required=True)
-    p.add_argument("--scenario")
-    p.add_argument("--episodes", type=int, default=100)
-    p.add_argument("--initial-lane", choices=["random", "non-target"])
-    p.add_argument("--max-steps", type=int, help="episode length (paper evaluation: 300)")
-    p.add_argument("--observation", choices=["vector", "grayscale"])
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--checkpoint", required=True, help="a learner checkpoint (.safetensors), e.g. "
+                                                       "RUN_DIR/checkpoints/final.safetensors")
+    p.add_argument("--scenario", help="straight | merge | curve | roundabout | lka (default: the config's)")
+    p.add_argument("--episodes", type=positive_int, default=100, help="greedy evaluation episodes")
+    p.add_argument("--initial-lane", choices=["random", "non-target"],
+                   help="where episodes start: any lane, or never the target lane (default: the config's)")
+    p.add_argument("--max-steps", type=positive_int, help="episode length (paper evaluation: 300)")
+    p.add_argument("--observation", choices=["vector", "grayscale"],
+                   help="observation type; must be the one the checkpoint was trained on")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="episode i is reset with seed SEED+i")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     p.add_argument("--png", help="LKA: where to write the response plot (default: next to the checkpoint)")
     p.add_argument("--demo-agreement", metavar="SHARD",
                    help="also report how often the greedy action is the demonstrator's on this demo shard's states")
     _add_config_args(p)
     p.set_defaults(func=_eval)
     p = sub.add_parser("replay", help="talk to a running replay server")
-    rsub = p.add_subparsers(dest="replay_cmd", required=True)
+    rsub = p.add_subparsers(dest="replay_cmd", required=True, metavar="ACTION")
     q = rsub.add_parser("inspect", help="print the replay server's stats")
-    q.add_argument("--router", default="tcp/127.0.0.1:7447", help="zenoh router endpoint")
-    q.add_argument("--run-id", default="run")
+    q.add_argument("--router", type=endpoint, default="tcp/127.0.0.1:7447", help="zenoh router endpoint")
+    q.add_argument("--run-id", default="run", help="the run's zenoh key namespace (transport.run_id)")
+    q.add_argument("--connect-timeout", type=positive_float, default=5.0, metavar="SECONDS",
+                   help="give up when no router answers at --router within this long")
     q.add_argument("--watch", action="store_true", help="refresh every --interval seconds")
-    q.add_argument("--interval", type=float, default=2.0)
-    q.add_argument("--json", action="store_true")
+    q.add_argument("--interval", type=positive_float, default=2.0, metavar="SECONDS",
+                   help="seconds between two refreshes of --watch")
+    q.add_argument("--json", action="store_true", help="print the stats as JSON")
     q.set_defaults(func=_replay_inspect)
 
 
 # ---------------------------------------------------------------------------- wiring
 
 
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("laneshift")
+    except PackageNotFoundError:  # run from a source tree that is not installed
+        return "unknown (not installed)"
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="laneshift", description=__doc__.split("\n")[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = Parser(prog="laneshift", description=__doc__)
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}",
+                        help="print laneshift's version and exit")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     _add_train(sub)
     _add_services(sub)
@@ -234,7 +375,7 @@ def build_parser() -> argparse.ArgumentParser:
     register_checkpoint_curve(which)
     register_sb3(which)
     register_presets(which)
-    bench = sub.add_parser("bench", help="benchmarks (env speed, replay throughput)")
+    bench = sub.add_parser("bench", help="benchmarks (env speed, replay throughput, learner updates)")
     bench_sub = bench.add_subparsers(dest="bench_cmd", required=True, metavar="WHAT")
     from laneshift.bench_env import register as register_bench_env
     from laneshift.bench_replay import register as register_bench_replay
@@ -243,22 +384,56 @@ def build_parser() -> argparse.ArgumentParser:
     register_bench_env(bench_sub)
     register_bench_replay(bench_sub)
     register_bench_learner(bench_sub)
+    from laneshift.deploy.bench_run import register as register_bench_run
+    from laneshift.deploy.bench_worker import register as register_bench_worker
+
+    register_bench_run(bench_sub)
+    register_bench_worker(bench_sub)
     from laneshift.deploy.chaos import register as register_chaos
 
     register_chaos(sub)
+    for command in leaf_parsers(parser):  # errors name the command they came from
+        command.set_defaults(cli_prog=command.prog)
     return parser
+
+
+def leaf_parsers(parser: argparse.ArgumentParser) -> list[argparse.ArgumentParser]:
+    """Every command parser under ``parser`` that runs something (has no sub-commands)."""
+    subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    if not subs:
+        return [parser]
+    return [leaf for a in subs for child in dict.fromkeys(a.choices.values()) for leaf in leaf_parsers(child)]
+
+
+def _zenoh_message(exc: BaseException) -> str:
+    """zenoh's error text without the Rust source location it appends."""
+    import re
+
+    return re.sub(r" at /\S+?:\d+\.?", "", str(exc)).strip()
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    prog = getattr(args, "cli_prog", "laneshift")
     try:
         return int(args.func(args) or 0)
     except ConfigError as exc:
-        print(f"laneshift: bad configuration: {exc}", file=sys.stderr)
+        print(f"{prog}: bad configuration: {exc}", file=sys.stderr)
         return 2
+    except SystemExit as exc:  # a command's own input check: raise SystemExit("what is wrong")
+        if isinstance(exc.code, str):
+            named = exc.code.startswith(prog.removeprefix("laneshift ") + ":")  # "bench learner: ..."
+            print(f"laneshift {exc.code}" if named else f"{prog}: {exc.code}", file=sys.stderr)
+            return 2
+        raise
     except KeyboardInterrupt:
         return 130
+    except Exception as exc:
+        if type(exc).__name__ == "ZError" and type(exc).__module__.startswith("zenoh"):
+            print(f"{prog}: zenoh: {_zenoh_message(exc)}", file=sys.stderr)
+            return 1
+        raise
 
 
 if __name__ == "__main__":

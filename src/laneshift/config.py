@@ -157,6 +157,9 @@ class ReplayConfig:
     restore: bool = True  # restore the online table from the run dir's checkpoint at start
     http_port: int = -1  # HTTP inspection API: -1 off, 0 a free port, else that port
     http_host: str = "127.0.0.1"  # bind elsewhere only on purpose: the API has no authentication
+    # Per-actor state is bounded (4,096 actors); a new actor beyond that evicts the actor idle
+    # longest, if it has been idle this long, else it is refused (counted as too_many_actors).
+    actor_idle_evict_s: float = 600.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -169,6 +172,7 @@ class ReplayConfig:
         _check(-1 <= self.http_port <= 65535, "replay.http_port", "must be -1 (off), 0 (any free port) or a port",
                self.http_port)
         _check(self.checkpoint_every_s >= 0, "replay.checkpoint_every_s", "must be >= 0", self.checkpoint_every_s)
+        _check(self.actor_idle_evict_s >= 0, "replay.actor_idle_evict_s", "must be >= 0", self.actor_idle_evict_s)
         _check(self.capacity >= 2, "replay.capacity", "must be >= 2", self.capacity)
         _check(self.demo_mode in DEMO_MODES, "replay.demo_mode", "must be none, retention, rehearsal or dqfd",
                self.demo_mode)

@@ -20,6 +20,7 @@ import numpy as np
 
 from .config import EnvConfig
 from .envspec import make_env
+from .progress import progress as progress_bar
 
 if TYPE_CHECKING:  # pragma: no cover
     from laneshift.actors.policy import QPolicy
@@ -44,16 +45,21 @@ INITIAL_LANES = ("random", "non-target")
 
 
 def evaluate_policy(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig, episodes: int,
-                    seed: int = 0) -> dict:
+                    seed: int = 0, progress: str | None = None) -> dict:
     """``make_policy(env)`` returns the policy (obs -> action) to evaluate on that env; scripted
-    drivers read the env's state, a network ignores it: ``lambda env: greedy``."""
+    drivers read the env's state, a network ignores it: ``lambda env: greedy``.
+
+    ``progress``: the label of a progress bar on stderr (:mod:`laneshift.progress`); None: quiet."""
+    if episodes < 1:
+        raise ValueError(f"episodes must be >= 1, not {episodes}")
     env = make_env(env_cfg)
     policy = make_policy(env)
     returns, lengths, survived, achieved = [], [], 0, 0
     # How the lane-change episodes that crashed ended: "collision" or "offroad", by starting lane.
     crashes: dict[str, dict[str, int]] = {}
     try:
-        for ep in range(episodes):
+        for ep in progress_bar(range(episodes), desc=progress or "", unit="episode", leave=False,
+                               disable=progress is None):
             obs, info = env.reset(seed=seed + ep)
             start_lane = info.get("lane_index")
             total, steps, done = 0.0, 0, False
@@ -82,9 +88,10 @@ def evaluate_policy(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig
 
 
 def evaluate_lanes(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig, episodes: int, seed: int,
-                   lanes: tuple[str, ...] = INITIAL_LANES) -> dict[str, dict]:
+                   lanes: tuple[str, ...] = INITIAL_LANES, progress: str | None = None) -> dict[str, dict]:
     """:func:`evaluate_policy` from each initial-lane setting, on the same episode seeds."""
-    return {lane: evaluate_policy(make_policy, dataclasses.replace(env_cfg, initial_lane=lane), episodes, seed)
+    return {lane: evaluate_policy(make_policy, dataclasses.replace(env_cfg, initial_lane=lane), episodes, seed,
+                                  progress=None if progress is None else f"{progress}, {lane} lane")
             for lane in lanes}
 
 
@@ -103,9 +110,9 @@ class CheckpointPolicy(NamedTuple):
 def load_checkpoint_policy(checkpoint: str | Path) -> CheckpointPolicy:
     """Read a learner checkpoint once: its network (plain or dueling) and its metadata."""
     from laneshift.actors.policy import QPolicy
-    from laneshift.learner.weights import load_checkpoint, load_into
+    from laneshift.wire import safetensors_loads
 
-    tensors, meta = load_checkpoint(checkpoint)
+    tensors, meta = safetensors_loads(Path(checkpoint).read_bytes())
     try:
         obs_shape = tuple(int(x) for x in meta["obs_shape"].split(","))
         hidden = tuple(int(x) for x in meta["hidden"].split(",") if x)
@@ -113,7 +120,7 @@ def load_checkpoint_policy(checkpoint: str | Path) -> CheckpointPolicy:
     except (KeyError, ValueError):
         raise ValueError(f"checkpoint {checkpoint}: missing laneshift metadata (obs_shape, hidden, n_actions)") from None
     policy = QPolicy(obs_shape, n_actions, hidden, dueling=meta.get("dueling", "0") == "1")
-    load_into(policy.net, tensors)
+    policy.load_tensors(tensors)
     return CheckpointPolicy(policy, obs_shape, n_actions, meta)
 
 
@@ -141,7 +148,8 @@ def demo_agreement(checkpoint: str | Path, shard_path: str | Path) -> dict:
     return out
 
 
-def evaluate_checkpoint(checkpoint: str | Path, env_cfg: EnvConfig, episodes: int, seed: int = 0) -> dict:
+def evaluate_checkpoint(checkpoint: str | Path, env_cfg: EnvConfig, episodes: int, seed: int = 0,
+                        progress: str | None = None) -> dict:
     from laneshift.envspec import env_spec
 
     ckpt = load_checkpoint_policy(checkpoint)
@@ -151,7 +159,7 @@ def evaluate_checkpoint(checkpoint: str | Path, env_cfg: EnvConfig, episodes: in
         raise ValueError(f"checkpoint {checkpoint} was trained on observations of shape {ckpt.obs_shape}, "
                          f"the env gives {expected}{hint}")
     greedy = ckpt.greedy()
-    return evaluate_policy(lambda env: greedy, env_cfg, episodes, seed)
+    return evaluate_policy(lambda env: greedy, env_cfg, episodes, seed, progress=progress)
 
 
 def lka_response(make_policy: Callable[[gym.Env], Policy], e1: float = -0.4, e2: float = 0.2,

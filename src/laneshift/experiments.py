@@ -21,6 +21,7 @@ import argparse
 import dataclasses
 import io
 import json
+import re
 import time
 from pathlib import Path
 from typing import Any
@@ -29,6 +30,7 @@ import numpy as np
 
 from .config import ConfigError, RunConfig, load_run_config
 from .evaluate import INITIAL_LANES, evaluate_lanes, load_greedy_policy, wilson_ci95
+from .progress import progress, write
 
 # DQfD (Hester et al. 2018): pre-training on demos (20,000 updates), demos kept in the buffer
 # (30 % of 300,000 items, i.e. about 300 scripted episodes), large-margin loss on demo rows,
@@ -66,12 +68,33 @@ def method_config(base: RunConfig, method: str, seed: int, run_dir: Path, env_st
     return load_run_config(overrides=overrides, base=base)
 
 
-def train_logged(cfg: RunConfig, log_path: Path) -> None:
-    """One real local training run, its console output kept in ``log_path``; raises if it failed."""
+class _TrainLog(io.StringIO):
+    """A training run's console output, kept for its log file. The launcher's status lines
+    (``steps 1,234/150,000 ...``) move ``bar`` (a line in another format just leaves it still)."""
+
+    _STEPS = re.compile(r"steps\s+([\d,]+)/([\d,]+)")
+
+    def __init__(self, bar):
+        super().__init__()
+        self.bar = bar
+
+    def write(self, text: str) -> int:
+        for m in self._STEPS.finditer(text):
+            done = min(int(m.group(1).replace(",", "")), int(self.bar.total or 0))
+            if done > self.bar.n:
+                self.bar.update(done - self.bar.n)
+        return super().write(text)
+
+
+def train_logged(cfg: RunConfig, log_path: Path, label: str | None = None) -> None:
+    """One real local training run, its console output kept in ``log_path``; raises if it failed.
+    ``label``: show the run's env steps as a progress bar on stderr with this label."""
     from .deploy.local import train_local
 
-    log = io.StringIO()
-    rc = train_local(cfg, out=log)
+    with progress(total=cfg.train.env_steps, desc=label or "", unit="step", leave=False,
+                  disable=label is None) as bar:
+        log = _TrainLog(bar)
+        rc = train_local(cfg, out=log)
     log_path.write_text(log.getvalue())
     if rc != 0:
         raise RuntimeError(f"training run {cfg.train.run_dir} failed (rc {rc}); see {log_path}")
@@ -85,31 +108,38 @@ def pooled(evals: list[dict], key: str) -> dict:
 
 
 def run_compare(args: argparse.Namespace) -> dict:
-    out_dir = Path(args.out).resolve()
-    out_dir.mkdir(parents=True, exist_ok=True)
-    user = dict(kv.split("=", 1) for kv in args.set)
+    from .cli import parse_set
+
+    user = parse_set(args.set)
     base = load_run_config(args.config, {"env.scenario": args.scenario, "actor.workers": args.workers, **user})
-    methods = [m for m in args.methods.split(",") if m]
-    seeds = [int(s) for s in args.seeds.split(",") if s]
+    methods, seeds = _names(args.methods), _seed_list(args.seeds)
+    out_dir = Path(args.out).resolve()
+    # Every run's config before the first run starts: a bad method, seed or --set fails now, not hours in.
+    configs = {(m, s): method_config(base, m, s, out_dir / f"{m}-s{s}", args.env_steps, user)
+               for m in methods for s in seeds}
+    out_dir.mkdir(parents=True, exist_ok=True)
     results: dict[str, Any] = {"scenario": args.scenario, "env_steps": args.env_steps, "seeds": seeds,
                                "eval_episodes": args.eval_episodes, "eval_max_steps": args.eval_max_steps,
                                "methods": {}, "baselines": {}}
     eval_seed = 100_000  # the same evaluation episodes for every method and baseline
+    drivers = ("random", "keep-lane", "scripted") if args.baselines else ()
+    overall = progress(total=len(configs) + len(drivers), desc="compare", unit="run")
     for method in methods:
         runs = []
         for seed in seeds:
             run_dir = out_dir / f"{method}-s{seed}"
-            cfg = method_config(base, method, seed, run_dir, args.env_steps, user)
+            cfg = configs[(method, seed)]
             started = time.monotonic()
-            train_logged(cfg, out_dir / f"{method}-s{seed}.log")
+            train_logged(cfg, out_dir / f"{method}-s{seed}.log", label=f"train {method} seed {seed}")
             greedy = load_greedy_policy(run_dir / "checkpoints" / "final.safetensors")
             evals = evaluate_lanes(lambda env: greedy, dataclasses.replace(cfg.env, max_steps=args.eval_max_steps),
-                                   args.eval_episodes, eval_seed)
+                                   args.eval_episodes, eval_seed, progress=f"eval {method} seed {seed}")
             runs.append({"seed": seed, "run_dir": str(run_dir), "wall_s": round(time.monotonic() - started, 1),
                          "eval": evals})
-            print(f"experiment: {method} seed {seed}: " + ", ".join(
+            write(f"experiment: {method} seed {seed}: " + ", ".join(
                 f"{lane} survival {e['survival_rate']:.0%} achievement {e['achievement_rate']:.0%}"
-                for lane, e in evals.items()), flush=True)
+                for lane, e in evals.items()))
+            overall.update()
         results["methods"][method] = {"runs": runs, **{
             lane: {"survival": pooled([r["eval"][lane] for r in runs], "survival_rate"),
                    "achievement": pooled([r["eval"][lane] for r in runs], "achievement_rate")}
@@ -121,18 +151,42 @@ def run_compare(args: argparse.Namespace) -> dict:
             env.action_space.seed(eval_seed)  # the random baseline's actions are reproducible too
             return lambda obs: env.action_space.sample()
 
-        drivers = {"random": random_driver, "keep-lane": KeepLaneDriver, "scripted": ScriptedDriver}
+        makers = {"random": random_driver, "keep-lane": KeepLaneDriver, "scripted": ScriptedDriver}
         n_base = args.eval_episodes * len(seeds)
-        for name, make in drivers.items():
-            evals = evaluate_lanes(make, dataclasses.replace(base.env, max_steps=args.eval_max_steps), n_base, eval_seed)
+        for name in drivers:
+            evals = evaluate_lanes(makers[name], dataclasses.replace(base.env, max_steps=args.eval_max_steps), n_base,
+                                   eval_seed, progress=f"baseline {name}")
             results["baselines"][name] = {lane: {"survival": pooled([e], "survival_rate"),
                                                  "achievement": pooled([e], "achievement_rate")}
                                           for lane, e in evals.items()}
+            overall.update()
+    overall.close()
     (out_dir / "results.json").write_text(json.dumps(results, indent=2))
     (out_dir / "table.md").write_text(render_table(results))
     plot_curves(results, out_dir)
     print(render_table(results))
     return results
+
+
+def _names(text: str) -> list[str]:
+    """``--methods``: comma separated, each one known."""
+    methods = [m.strip() for m in text.split(",") if m.strip()]
+    if not methods:
+        raise ConfigError(f"--methods: name at least one of {', '.join(METHODS)}")
+    for m in methods:
+        method_settings(m, "--methods")
+    return methods
+
+
+def _seed_list(text: str) -> list[int]:
+    """``--seeds``: comma-separated integers >= 0."""
+    try:
+        seeds = [int(s) for s in text.split(",") if s.strip()]
+    except ValueError:
+        seeds = []
+    if not seeds or min(seeds) < 0:
+        raise ConfigError(f"--seeds: expected comma-separated integers >= 0, got {text!r}")
+    return seeds
 
 
 def render_table(results: dict) -> str:
@@ -203,16 +257,19 @@ def plot_curves(results: dict, out_dir: Path, window: int = 100) -> None:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from .cli import add_set_arg, positive_int
+
     p = subparsers.add_parser("compare", help="train and evaluate methods x seeds (the paper's Table 2)")
-    p.add_argument("--scenario", default="straight")
+    p.add_argument("--scenario", default="straight", help="straight | merge | curve | roundabout")
     p.add_argument("--methods", default="none,retention,rehearsal,dqfd", help=f"comma separated: {', '.join(METHODS)}")
-    p.add_argument("--seeds", default="0,1,2")
-    p.add_argument("--env-steps", type=int, default=150_000)
-    p.add_argument("--workers", type=int, default=2)
-    p.add_argument("--eval-episodes", type=int, default=200, help="per seed and initial lane")
-    p.add_argument("--eval-max-steps", type=int, default=300, help="evaluation episode length (paper: 300)")
-    p.add_argument("--no-baselines", dest="baselines", action="store_false")
-    p.add_argument("--out", default="runs/experiment")
+    p.add_argument("--seeds", default="0,1,2", help="comma-separated training seeds: one run per method and seed")
+    p.add_argument("--env-steps", type=positive_int, default=150_000, help="env-step budget of each training run")
+    p.add_argument("--workers", type=positive_int, default=2, help="env workers (Ray actors) of each run")
+    p.add_argument("--eval-episodes", type=positive_int, default=200, help="greedy evaluation episodes per seed and initial lane")
+    p.add_argument("--eval-max-steps", type=positive_int, default=300, help="evaluation episode length (paper: 300)")
+    p.add_argument("--no-baselines", dest="baselines", action="store_false",
+                   help="skip the random, keep-lane and scripted driver baselines")
+    p.add_argument("--out", default="runs/experiment", help="where the runs, results.json, table.md and plots go")
     p.add_argument("--config", help="base config file (YAML/TOML/JSON)")
-    p.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE")
+    add_set_arg(p)
     p.set_defaults(func=lambda a: (run_compare(a), 0)[1])

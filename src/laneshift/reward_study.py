@@ -23,43 +23,58 @@ from typing import Any
 
 import numpy as np
 
-from .config import load_run_config
+from .config import ConfigError, load_run_config
+from .progress import progress, write
 
 
 def preset_overrides(preset: int) -> dict[str, Any]:
     """The env's reward condition and Table 1's exploration schedule for it."""
     from laneshift.actors.envs.rewards import get_preset
 
-    p = get_preset(preset)
+    try:
+        p = get_preset(preset)
+    except ValueError as exc:  # an unknown condition
+        raise ConfigError(f"--presets: {exc}") from None
     return {"env.reward_preset": preset, "actor.exploration": "linear", "actor.epsilon_start": p.epsilon_initial,
             "actor.epsilon_final": p.epsilon_final}
 
 
 def run_presets(args: argparse.Namespace) -> dict:
+    from .cli import parse_set
     from .evaluate import evaluate_checkpoint
     from .experiments import _episode_curves, train_logged
 
     out_dir = Path(args.out).resolve()
+    scenarios = [s.strip() for s in args.scenarios.split(",") if s.strip()]
+    presets = args.presets
+    if not scenarios:
+        raise ConfigError(f"--scenarios: name at least one scenario, got {args.scenarios!r}")
+    user = parse_set(args.set)
+    # Every run's config before the first run starts: a bad scenario, condition or --set fails now.
+    configs = {}
+    for scenario in scenarios:
+        for preset in presets:
+            name = f"{scenario}-p{preset}"
+            configs[name] = load_run_config(args.config, {
+                "env.scenario": scenario, **preset_overrides(preset), "actor.workers": args.workers,
+                "train.env_steps": args.env_steps, "train.run_dir": str(out_dir / name), "train.eval_episodes": 0,
+                "train.seed": args.seed, "actor.seed": args.seed, "learner.seed": args.seed,
+                "replay.seed": args.seed, "transport.run_id": name, **user})
     out_dir.mkdir(parents=True, exist_ok=True)
-    scenarios = [s for s in args.scenarios.split(",") if s]
-    presets = [int(p) for p in args.presets.split(",") if p]
     results: dict[str, Any] = {"env_steps": args.env_steps, "seed": args.seed, "runs": {}}
     returns_by_run: dict[str, np.ndarray] = {}  # training returns, read once for the table and the plot
+    overall = progress(total=len(configs), desc="presets", unit="run")
     for scenario in scenarios:
         for preset in presets:
             name = f"{scenario}-p{preset}"
             run_dir = out_dir / name
-            cfg = load_run_config(args.config, {
-                "env.scenario": scenario, **preset_overrides(preset), "actor.workers": args.workers,
-                "train.env_steps": args.env_steps, "train.run_dir": str(run_dir), "train.eval_episodes": 0,
-                "train.seed": args.seed, "actor.seed": args.seed, "learner.seed": args.seed,
-                "replay.seed": args.seed, "transport.run_id": name, **dict(kv.split("=", 1) for kv in args.set)})
+            cfg = configs[name]
             started = time.monotonic()
-            train_logged(cfg, out_dir / f"{name}.log")
+            train_logged(cfg, out_dir / f"{name}.log", label=f"train {name}")
             _, returns, lengths = _episode_curves(str(run_dir))
             returns_by_run[name] = returns
             ev = evaluate_checkpoint(run_dir / "checkpoints" / "final.safetensors", cfg.env,
-                                     episodes=args.eval_episodes, seed=100_000)
+                                     episodes=args.eval_episodes, seed=100_000, progress=f"eval {name}")
             tail = returns[-100:] if len(returns) else np.zeros(1)
             results["runs"][name] = {
                 "scenario": scenario, "preset": preset, "run_dir": str(run_dir),
@@ -68,9 +83,10 @@ def run_presets(args: argparse.Namespace) -> dict:
                 "length_last100": float(np.mean(lengths[-100:])) if len(lengths) else 0.0,
                 "eval": {k: ev[k] for k in ("survival_rate", "achievement_rate", "return_mean") if k in ev}}
             r = results["runs"][name]
-            print(f"presets: {name}: {r['episodes']} episodes, last-100 return {r['return_last100']:.1f}, "
-                  f"greedy survival {r['eval']['survival_rate']:.0%} achievement {r['eval'].get('achievement_rate', 0):.0%}",
-                  flush=True)
+            write(f"presets: {name}: {r['episodes']} episodes, last-100 return {r['return_last100']:.1f}, "
+                  f"greedy survival {r['eval']['survival_rate']:.0%} achievement {r['eval'].get('achievement_rate', 0):.0%}")
+            overall.update()
+    overall.close()
     (out_dir / "results.json").write_text(json.dumps(results, indent=2))
     (out_dir / "table.md").write_text(render(results))
     plot(returns_by_run, scenarios, presets, out_dir / "returns.png")
@@ -117,14 +133,17 @@ def plot(returns_by_run: dict[str, np.ndarray], scenarios: list[str], presets: l
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from .cli import add_set_arg, comma_list, non_negative_int, positive_int
+
     p = subparsers.add_parser("presets", help="reward conditions 1-5 on merge/curve/roundabout (figure 4)")
-    p.add_argument("--scenarios", default="merge,curve,roundabout")
-    p.add_argument("--presets", default="1,2,3,4,5")
-    p.add_argument("--env-steps", type=int, default=30_000)
-    p.add_argument("--workers", type=int, default=2)
-    p.add_argument("--eval-episodes", type=int, default=50)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", default="runs/exp-presets")
+    p.add_argument("--scenarios", default="merge,curve,roundabout", help="comma-separated scenarios")
+    p.add_argument("--presets", type=comma_list(positive_int, "reward conditions 1-5"), default=[1, 2, 3, 4, 5],
+                   help="comma-separated reward conditions (Table 1)")
+    p.add_argument("--env-steps", type=positive_int, default=30_000, help="env-step budget of each training run")
+    p.add_argument("--workers", type=positive_int, default=2, help="env workers (Ray actors) of each run")
+    p.add_argument("--eval-episodes", type=positive_int, default=50, help="greedy evaluation episodes of each run")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="training seed of every run")
+    p.add_argument("--out", default="runs/exp-presets", help="where the runs, results.json, table.md and plot go")
     p.add_argument("--config", help="base config file (YAML/TOML/JSON)")
-    p.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE")
+    add_set_arg(p)
     p.set_defaults(func=lambda a: (run_presets(a), 0)[1])

@@ -21,15 +21,18 @@ from pathlib import Path
 from .config import EnvConfig
 from .envspec import make_env
 from .evaluate import INITIAL_LANES, evaluate_lanes
+from .progress import progress, write
 
 
 def train_sb3(env_cfg: EnvConfig, env_steps: int, eval_every: int, eval_episodes: int, seed: int,
-              eval_seed: int, stop_at_achievement: float | None = None, out: Path | None = None) -> dict:
+              eval_seed: int, stop_at_achievement: float | None = None, out: Path | None = None,
+              show_progress: bool = False) -> dict:
+    """``show_progress``: env steps (and each evaluation) as progress bars on stderr."""
     try:
         from stable_baselines3 import DQN
         from stable_baselines3.common.callbacks import BaseCallback
     except ImportError as exc:
-        raise SystemExit(f"laneshift experiment sb3 needs stable-baselines3: pip install -e '.[baselines]' ({exc})")
+        raise SystemExit(f"needs stable-baselines3: pip install -e '.[baselines]' ({exc})")
     import numpy as np
     import torch
 
@@ -43,25 +46,33 @@ def train_sb3(env_cfg: EnvConfig, env_steps: int, eval_every: int, eval_episodes
     def greedy(obs: np.ndarray) -> int:
         return int(model.predict(obs, deterministic=True)[0])
 
+    bar = progress(total=env_steps, desc="sb3 DQN", unit="step", disable=not show_progress)
+
     class Scores(BaseCallback):
         def _on_step(self) -> bool:
+            bar.update()
             if self.num_timesteps % eval_every:
                 return True
             t0 = time.monotonic()
             row = {"env_steps": self.num_timesteps,
                    "train_s": round(t0 - started - eval_time[0], 1)}
-            for lane, r in evaluate_lanes(lambda _env: greedy, env_cfg, eval_episodes, eval_seed).items():
+            for lane, r in evaluate_lanes(lambda _env: greedy, env_cfg, eval_episodes, eval_seed,
+                                          progress=f"eval at {self.num_timesteps:,} steps" if show_progress
+                                          else None).items():
                 row[lane] = {k: r[k] for k in ("survival_rate", "achievement_rate", "return_mean") if k in r}
             eval_time[0] += time.monotonic() - t0
             curve.append(row)
-            print(f"sb3: {row['env_steps']:,} steps, {row['train_s']:.0f} s training: "
+            write(f"sb3: {row['env_steps']:,} steps, {row['train_s']:.0f} s training: "
                   + ", ".join(f"{lane} {row[lane]['survival_rate']:.0%}/{row[lane].get('achievement_rate', 0):.0%}"
-                              for lane in INITIAL_LANES), flush=True)
+                              for lane in INITIAL_LANES))
             reached = stop_at_achievement is not None and min(
                 row[lane].get("achievement_rate", 0.0) for lane in INITIAL_LANES) >= stop_at_achievement
             return not reached
 
-    model.learn(total_timesteps=env_steps, callback=Scores())
+    try:
+        model.learn(total_timesteps=env_steps, callback=Scores())
+    finally:
+        bar.close()
     result = {"library": "stable-baselines3", "algorithm": "DQN", "env": env_cfg.__dict__, "env_steps": env_steps,
               "seed": seed, "eval_episodes": eval_episodes, "eval_seed": eval_seed,
               "hyperparameters": {k: repr(getattr(model, k)) for k in (
@@ -80,21 +91,23 @@ def train_sb3(env_cfg: EnvConfig, env_steps: int, eval_every: int, eval_episodes
 def _run(args: argparse.Namespace) -> int:
     env_cfg = EnvConfig(scenario=args.scenario)
     result = train_sb3(env_cfg, args.env_steps, args.eval_every, args.eval_episodes, args.seed, args.eval_seed,
-                       args.stop_at_achievement, Path(args.out))
+                       args.stop_at_achievement, Path(args.out), show_progress=True)
     print(json.dumps(result) if args.json else f"sb3 DQN: {result['train_s']:.0f} s training; results in {args.out}")
     return 0
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from .cli import fraction, non_negative_int, positive_int
+
     p = subparsers.add_parser("sb3", help="stable-baselines3 DQN on the same env (single-process baseline)")
-    p.add_argument("--scenario", default="straight")
-    p.add_argument("--env-steps", type=int, default=150_000)
-    p.add_argument("--eval-every", type=int, default=25_000)
-    p.add_argument("--eval-episodes", type=int, default=50)
-    p.add_argument("--eval-seed", type=int, default=200_000)
-    p.add_argument("--stop-at-achievement", type=float, default=None,
-                   help="stop once both initial-lane settings reach this achievement rate")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", default="runs/sb3")
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--scenario", default="straight", help="straight | merge | curve | roundabout | lka")
+    p.add_argument("--env-steps", type=positive_int, default=150_000, help="env-step budget of the run")
+    p.add_argument("--eval-every", type=positive_int, default=25_000, help="score the greedy policy every N env steps")
+    p.add_argument("--eval-episodes", type=positive_int, default=50, help="greedy episodes per score and initial lane")
+    p.add_argument("--eval-seed", type=non_negative_int, default=200_000, help="evaluation episode seeds")
+    p.add_argument("--stop-at-achievement", type=fraction, default=None,
+                   help="stop once both initial-lane settings reach this achievement rate (0 to 1)")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="sb3's training seed")
+    p.add_argument("--out", default="runs/sb3", help="where the model (sb3_dqn.zip) and results.json go")
+    p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     p.set_defaults(func=_run)

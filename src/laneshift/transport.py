@@ -32,12 +32,16 @@ from .wire import Kind, WireError, decode_error, decode_json, encode_error, peek
 DEFAULT_MAX_MESSAGE_BYTES = 64 * 2**20
 
 
-def session_config(endpoint: str, mode: str, max_message_bytes: int = DEFAULT_MAX_MESSAGE_BYTES) -> zenoh.Config:
+def session_config(endpoint: str, mode: str, max_message_bytes: int = DEFAULT_MAX_MESSAGE_BYTES,
+                   connect_timeout_s: float | None = None) -> zenoh.Config:
     """A zenoh config: ``router`` listens on ``endpoint``, ``client`` connects to it.
 
     ``max_message_bytes``: a larger message is dropped by the receiving link before it is
     buffered whole (laneshift's own size checks only run after zenoh received all of it: a few
     256 MiB messages took the replay server to ~1.5 GB and the router to ~0.9 GB).
+
+    ``connect_timeout_s`` (clients only): give up opening when no router answered in that long
+    (``zenoh.open`` raises) instead of retrying forever; for one-shot commands.
     """
     if mode not in ("router", "client"):
         raise ValueError(f"mode must be router or client, got {mode!r}")
@@ -71,6 +75,11 @@ def session_config(endpoint: str, mode: str, max_message_bytes: int = DEFAULT_MA
         # Keep retrying (the router may start after us, or restart): never give up.
         conf.insert_json5("connect/timeout_ms", "-1")
         conf.insert_json5("connect/exit_on_failure", "false")
+        if connect_timeout_s is not None:
+            # A one-shot command (`laneshift replay inspect`) waits this long, then fails: zenoh
+            # 1.10 with timeout_ms and exit_on_failure makes zenoh.open raise ZError ("Timeout!").
+            conf.insert_json5("connect/timeout_ms", str(max(1, int(connect_timeout_s * 1000))))
+            conf.insert_json5("connect/exit_on_failure", "true")
     return conf
 
 
@@ -86,6 +95,28 @@ def use_service_runtime() -> None:
     os.environ.setdefault("ZENOH_RUNTIME", SERVICE_RUNTIME)
 
 
+def close_sessions(sessions: list[zenoh.Session], timeout_s: float, who: str) -> bool:
+    """Close ``sessions`` from a helper thread, waiting at most ``timeout_s``: a stop must finish
+    even when a close hangs (a replay server's graceful stop once waited forever on a router that
+    had been killed under a flood of oversized messages). True if all closed in time."""
+
+    def close_all() -> None:
+        for session in sessions:
+            try:
+                session.close()
+            except Exception:  # noqa: BLE001 - closing twice, or a session already gone
+                pass
+
+    closer = threading.Thread(target=close_all, name=f"{who}-close", daemon=True)
+    closer.start()
+    closer.join(timeout_s)
+    if closer.is_alive():
+        print(f"{who}: zenoh sessions did not close within {timeout_s:g} s (router gone?); exiting without them",
+              flush=True)
+        return False
+    return True
+
+
 def free_tcp_port() -> int:
     """A TCP port free on 127.0.0.1 right now, for a router endpoint of a local run or a test."""
     with socket.socket() as s:
@@ -93,12 +124,24 @@ def free_tcp_port() -> int:
         return s.getsockname()[1]
 
 
-def open_session(cfg: TransportConfig, mode: str = "client", max_message_bytes: int | None = None) -> zenoh.Session:
+def open_session(cfg: TransportConfig, mode: str = "client", max_message_bytes: int | None = None,
+                 connect_timeout_s: float | None = None) -> zenoh.Session:
     """Open a session; use as ``with open_session(cfg) as s:``. ``max_message_bytes``: the run's
-    (``RunConfig.max_message_bytes``); else ``transport.max_message_mb``, else the default."""
+    (``RunConfig.max_message_bytes``); else ``transport.max_message_mb``, else the default.
+
+    ``connect_timeout_s``: a client gives up after that long without a router and this raises
+    ConnectionError naming the endpoint (None: it waits for one forever, as services do)."""
     if max_message_bytes is None:
         max_message_bytes = int(cfg.max_message_mb * 2**20) if cfg.max_message_mb else DEFAULT_MAX_MESSAGE_BYTES
-    return zenoh.open(session_config(cfg.router, mode, max_message_bytes))
+    conf = session_config(cfg.router, mode, max_message_bytes, connect_timeout_s)
+    if connect_timeout_s is None or mode != "client":
+        return zenoh.open(conf)
+    try:
+        return zenoh.open(conf)
+    except zenoh.ZError as exc:
+        if "timeout" not in str(exc).lower():
+            raise
+        raise ConnectionError(f"no zenoh router answered at {cfg.router} within {connect_timeout_s:g} s") from None
 
 
 def data_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:

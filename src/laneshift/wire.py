@@ -120,6 +120,12 @@ def replay_control_key(run: str) -> str:
     return f"laneshift/{_check_name('run', run)}/replay/control"
 
 
+def replay_info_key(run: str) -> str:
+    """Queryable: JSON ``{"wire_version", "obs_shape", "obs_dtype", "n_actions", "run_id", "mode", "http_url"}``,
+    what a client needs to build TRANSITIONS for this run (docs/wire.md §7)."""
+    return f"laneshift/{_check_name('run', run)}/replay/info"
+
+
 def priorities_key(run: str) -> str:
     """Learner -> replay server: PRIORITIES messages (prioritized sampling)."""
     return f"laneshift/{_check_name('run', run)}/replay/priorities"
@@ -449,6 +455,17 @@ class Weights:
     phase: int  # rehearsal phase (0 when not rehearsing)
     updates: int  # learner updates done when these weights were taken
     tensors: dict[str, np.ndarray]
+
+
+def tensors_digest(tensors: Mapping[str, np.ndarray]) -> str:
+    """sha256 over names and bytes in name order: equal digests mean equal weights."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for name in sorted(tensors):
+        h.update(name.encode())
+        h.update(np.ascontiguousarray(tensors[name]).tobytes())
+    return h.hexdigest()
 
 
 def encode_weights(weights: Weights) -> bytes:

@@ -18,6 +18,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from ..cli import non_negative_float, non_negative_int, positive_float, positive_int
 from .shard import ShardError
 
 
@@ -52,7 +53,7 @@ def _add_env_arguments(parser: argparse.ArgumentParser) -> None:
                         help="scenario name (straight, merge, curve, roundabout, lka) or gymnasium id")
     parser.add_argument("--observation", choices=("vector", "grayscale"),
                         help="observation type (default: the env's)")
-    parser.add_argument("--max-steps", type=int, help="episode length limit (env kwarg max_steps)")
+    parser.add_argument("--max-steps", type=positive_int, help="episode length limit (env kwarg max_steps)")
     parser.add_argument("--reward-preset", help="reward condition (env kwarg reward_preset)")
     parser.add_argument("--initial-lane", type=_json_or_str,
                         help="initial lane (env kwarg initial_lane)")
@@ -67,15 +68,20 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     try:
         path = generate_shard(args.out, env_id_or_scenario=args.scenario,
                               env_kwargs=env_kwargs_from_args(args), episodes=args.episodes,
-                              seed=args.seed)
+                              seed=args.seed, progress="demos generate")
     except (FileExistsError, ValueError) as exc:  # bad arguments / existing output
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"{_prog(args)}: {exc}", file=sys.stderr)
         return 2
     meta = read_metadata(path)
     print(f"wrote {path}: {meta['episodes']} episodes, {meta['steps']} steps of {meta['env_id']} "
           f"in {meta.get('generation_seconds', float('nan')):.1f} s; demonstrator survival "
           f"{_rate(meta.get('survival_rate'))}, achievement {_rate(meta.get('achievement_rate'))}")
     return 0
+
+
+def _prog(args: argparse.Namespace) -> str:
+    """The command's name for an error line (``laneshift demos generate``)."""
+    return getattr(args, "cli_prog", None) or "laneshift demos"
 
 
 def _rate(rate: float | None) -> str:
@@ -90,7 +96,7 @@ def _cmd_record(args: argparse.Namespace) -> int:
                             env_kwargs=env_kwargs_from_args(args), episodes=args.episodes,
                             seed=args.seed, fps=args.fps, scale=args.scale)
     except (FileExistsError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"{_prog(args)}: {exc}", file=sys.stderr)
         return 2
     if path is None:
         print("no episode was completed: nothing written", file=sys.stderr)
@@ -111,7 +117,7 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
     try:
         episodes = read_verified(args.shard)  # checksum verified; no flat copy of the obs
     except ShardError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"{_prog(args)}: {exc}", file=sys.stderr)
         return 2
     summary = summarize(episodes)
     directory = Path(args.shard).absolute()
@@ -131,10 +137,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "generate", help="record scripted-driver demonstrations into a demo shard",
         description="Run the scripted demonstrator and write a demo shard (Minari dataset).")
     _add_env_arguments(generate)
-    generate.add_argument("--episodes", type=int, required=True)
+    generate.add_argument("--episodes", type=positive_int, required=True, help="episodes to drive and record")
     generate.add_argument("--out", required=True,
                           help="shard directory to create (must not exist or be empty)")
-    generate.add_argument("--seed", type=int, default=0,
+    generate.add_argument("--seed", type=non_negative_int, default=0,
                           help="episode i is reset with seed SEED+i (default 0)")
     generate.set_defaults(func=_cmd_generate)
 
@@ -144,14 +150,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "turn left/right (combinations allowed), P pause, Backspace discard the "
                     "episode, Esc/Q quit (completed episodes are saved).")
     _add_env_arguments(record)
-    record.add_argument("--episodes", type=int, required=True)
+    record.add_argument("--episodes", type=positive_int, required=True,
+                        help="episodes to complete (fewer when you quit early)")
     record.add_argument("--out", required=True,
                         help="shard directory to create (must not exist or be empty)")
-    record.add_argument("--seed", type=int, default=0,
+    record.add_argument("--seed", type=non_negative_int, default=0,
                         help="episode attempt k is reset with seed SEED+k (default 0)")
-    record.add_argument("--fps", type=float,
-                        help="env steps per second (default: the env's render_fps)")
-    record.add_argument("--scale", type=float, default=1.0, help="window zoom factor")
+    record.add_argument("--fps", type=non_negative_float,
+                        help="env steps per second (default: the env's render_fps; 0: as fast as frames are drawn)")
+    record.add_argument("--scale", type=positive_float, default=1.0, help="window zoom factor")
     record.set_defaults(func=_cmd_record)
 
     inspect = subparsers.add_parser(

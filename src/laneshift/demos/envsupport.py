@@ -36,8 +36,20 @@ def scenarios() -> dict[str, str]:
 
 
 def resolve_env_id(env_id_or_scenario: str) -> str:
-    """Map a scenario short name (``straight``) to its gymnasium id; pass ids through."""
-    return scenarios().get(env_id_or_scenario, env_id_or_scenario)
+    """Map a scenario short name (``straight``) to its gymnasium id; pass registered ids through
+    (``module:Id`` imports ``module`` first). Anything else is a ValueError naming the choices."""
+    known = scenarios()
+    if env_id_or_scenario in known:
+        return known[env_id_or_scenario]
+    try:
+        gym.spec(env_id_or_scenario)
+    except gym.error.Error:
+        names = ", ".join(known) or "none: laneshift.actors.envs is not installed"
+        raise ValueError(f"unknown scenario or env id {env_id_or_scenario!r} (scenarios: {names}; "
+                         f"or a registered gymnasium id such as CartPole-v1)") from None
+    except ImportError as exc:  # module:Id whose module does not import
+        raise ValueError(f"env id {env_id_or_scenario!r}: {exc}") from None
+    return env_id_or_scenario
 
 
 def make_env(env_id: str, env_kwargs: dict[str, Any], **extra: Any) -> gym.Env:
@@ -48,6 +60,11 @@ def make_env(env_id: str, env_kwargs: dict[str, Any], **extra: Any) -> gym.Env:
     """
     module = _laneshift_envs()
     kwargs = {**env_kwargs, **extra}
-    if module is not None and env_id in scenarios().values() and hasattr(module, "make_env"):
-        return module.make_env(env_id, **kwargs)
-    return gym.make(env_id, **kwargs)
+    try:
+        if module is not None and env_id in scenarios().values() and hasattr(module, "make_env"):
+            return module.make_env(env_id, **kwargs)
+        return gym.make(env_id, **kwargs)
+    except TypeError as exc:  # an env kwarg the env does not take: the caller's input, said as such
+        if "unexpected keyword argument" not in str(exc):
+            raise
+        raise ValueError(f"{env_id}: {exc}".split(" was raised from")[0]) from None

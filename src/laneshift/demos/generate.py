@@ -26,6 +26,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from ..progress import progress as progress_bar
 from .envsupport import make_env, resolve_env_id
 from .writer import check_out_dir, write_shard
 
@@ -87,8 +88,11 @@ def generate_shard(
     episodes: int,
     seed: int,
     policy: str | PolicyFactory = "scripted",
+    progress: str | None = None,
 ) -> Path:
     """Run ``episodes`` demonstrator episodes and write them as a shard at ``out_dir``.
+
+    ``progress``: the label of a progress bar over the episodes on stderr; None: quiet.
 
     The shard's metadata records the demonstrator's ``survival_rate`` (share of episodes
     without a crash) and ``achievement_rate`` (share ending on the target lane), each None
@@ -107,7 +111,7 @@ def generate_shard(
         env.action_space.seed(seed)
         started = time.perf_counter()
         recorded, names = [], set()
-        for i in range(episodes):
+        for i in progress_bar(range(episodes), desc=progress or "", unit="episode", disable=progress is None):
             driver = policy(env)  # fresh per episode: no state leaks between episodes
             names.add(_driver_name(policy, driver))
             recorded.append(run_episode(env, driver, seed + i))

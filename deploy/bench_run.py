@@ -1,0 +1,178 @@
+"""``laneshift bench run``: a whole local run measured from outside: start-up, throughput, memory.
+
+What it is: the launcher started as its own process (``laneshift train --local ...``, the
+arguments of ``make train`` unless told otherwise), watched every 0.5 s through /proc:
+
+* start-up: seconds from the command until its progress line first shows an env step stored;
+* throughput: env steps/s and learner updates/s over the run, from its summary;
+* memory: the process tree's RSS and PSS summed at each sample (peak over the run), and each
+  process's own peak, named by what it is (launcher, each component, Ray's own processes).
+  PSS splits shared pages between the processes that share them, so the PSS sum is what the run
+  really costs; the RSS sum counts shared libraries (torch) once per process.
+
+Why /proc and not psutil: psutil is not a dependency, and two files per process say it all.
+May import: the contract and ``deploy``.
+
+    laneshift bench run --json
+    laneshift bench run --train-args "--workers 4 --env-steps 40000"
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import shlex
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+from .chaos import descendants
+
+#: ``make train``'s run without its demo phase: what a user's first run costs.
+DEFAULT_TRAIN_ARGS = "--workers 2 --scenario straight --env-steps 20000"
+_STEPS = re.compile(r"steps\s+([\d,]+)/")
+
+
+def _read_kb(path: str, field: str) -> int:
+    try:
+        with open(path) as f:
+            for line in f:
+                if line.startswith(field):
+                    return int(line.split()[1])
+    except (OSError, ValueError, IndexError):
+        pass
+    return 0
+
+
+def process_label(pid: int, launcher: int) -> str:
+    """What a process of the run is, from its command line (Ray names actor processes ray::Class)."""
+    if pid == launcher:
+        return "launcher"
+    try:
+        cmd = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+    except OSError:
+        return "?"
+    for actor, label in (("RouterActor", "router"), ("ReplayServerActor", "replay-server"),
+                         ("LearnerActor", "learner"), ("EnvWorkerActor", "env-worker")):
+        if f"ray::{actor}" in cmd:
+            return label
+    if cmd.startswith("ray::"):
+        return "ray-worker (" + cmd.split()[0][5:] + ")"
+    for part, label in (("gcs_server", "ray gcs"), ("raylet", "ray raylet"), ("dashboard/agent.py", "ray dashboard agent"),
+                        ("runtime_env/agent", "ray runtime-env agent"), ("log_monitor.py", "ray log monitor"),
+                        ("monitor.py", "ray monitor"), ("dashboard.py", "ray dashboard"), ("default_worker.py", "ray-worker (idle)")):
+        if part in cmd:
+            return label
+    return Path(cmd.split()[0]).name if cmd.strip() else "?"
+
+
+class TreeSampler(threading.Thread):
+    """Samples the RSS and PSS of ``root`` and everything below it until stopped."""
+
+    def __init__(self, root: int, period_s: float = 0.5):
+        super().__init__(daemon=True, name="tree-sampler")
+        self.root, self.period_s = root, period_s
+        self.peak_rss_kb = self.peak_pss_kb = 0
+        self.per_process: dict[int, dict] = {}  # pid -> {"label", "rss_kb", "pss_kb"} (peaks)
+        self._halt = threading.Event()
+
+    def run(self) -> None:
+        while not self._halt.wait(self.period_s):
+            pids = {self.root} | descendants(self.root)
+            rss = pss = 0
+            for pid in pids:
+                r = _read_kb(f"/proc/{pid}/status", "VmRSS:")
+                p = _read_kb(f"/proc/{pid}/smaps_rollup", "Pss:")
+                if not r:
+                    continue
+                rss, pss = rss + r, pss + p
+                seen = self.per_process.setdefault(pid, {"label": "?", "rss_kb": 0, "pss_kb": 0})
+                # Again each time: a Ray worker is "default_worker.py" until it becomes an actor.
+                seen["label"] = process_label(pid, self.root)
+                seen["rss_kb"], seen["pss_kb"] = max(seen["rss_kb"], r), max(seen["pss_kb"], p)
+            self.peak_rss_kb, self.peak_pss_kb = max(self.peak_rss_kb, rss), max(self.peak_pss_kb, pss)
+
+    def stop(self) -> None:
+        self._halt.set()
+        self.join(5)
+
+    def by_label(self) -> dict[str, dict]:
+        """Each kind of process: how many, and the largest one's peak RSS / PSS in MB."""
+        out: dict[str, dict] = {}
+        for p in self.per_process.values():
+            row = out.setdefault(p["label"], {"count": 0, "rss_mb": 0.0, "pss_mb": 0.0})
+            row["count"] += 1
+            row["rss_mb"] = max(row["rss_mb"], round(p["rss_kb"] / 1024, 1))
+            row["pss_mb"] = max(row["pss_mb"], round(p["pss_kb"] / 1024, 1))
+        return dict(sorted(out.items(), key=lambda kv: -kv[1]["pss_mb"]))
+
+
+def bench_run(train_args: str, timeout_s: float = 900.0) -> dict:
+    run_dir = Path(tempfile.mkdtemp(prefix="lsbench-")) / "run"
+    cmd = [sys.executable, "-m", "laneshift", "train", "--local", "--run-dir", str(run_dir), *shlex.split(train_args)]
+    started = time.monotonic()
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    sampler = TreeSampler(proc.pid)
+    sampler.start()
+    first_step_s, tail = None, []
+    try:
+        for line in proc.stdout:
+            tail = (tail + [line])[-40:]
+            m = _STEPS.search(line)
+            if first_step_s is None and m and int(m.group(1).replace(",", "")) > 0:
+                first_step_s = round(time.monotonic() - started, 1)
+            if time.monotonic() - started > timeout_s:
+                proc.kill()
+                break
+        rc = proc.wait(60)
+    finally:
+        sampler.stop()
+        if proc.poll() is None:
+            proc.kill()
+    wall = round(time.monotonic() - started, 1)
+    try:
+        summary = json.loads((run_dir / "summary.json").read_text())
+    except (OSError, json.JSONDecodeError):
+        return {"rc": rc, "error": "no summary.json", "log_tail": "".join(tail)}
+    learner = summary.get("learner", {})
+    return {
+        "train_args": train_args, "rc": rc, "wall_s": wall, "first_env_step_s": first_step_s,
+        "env_steps": summary["env_steps"], "run_s": summary["wall_s"],
+        "env_steps_per_s": round(summary["env_steps"] / max(summary["wall_s"], 1e-6), 1),
+        "updates": learner.get("updates"), "updates_per_s": learner.get("updates_per_s"),
+        "peak_tree_rss_mb": round(sampler.peak_rss_kb / 1024), "peak_tree_pss_mb": round(sampler.peak_pss_kb / 1024),
+        "processes": sampler.by_label(), "run_dir": str(run_dir),
+    }
+
+
+def render(r: dict) -> str:
+    if "error" in r:
+        return f"bench run: {r['error']} (rc {r['rc']})\n{r.get('log_tail', '')}"
+    lines = [f"laneshift train --local {r['train_args']}",
+             f"  first env step {r['first_env_step_s']} s after the command; run {r['run_s']} s, "
+             f"{r['env_steps_per_s']} env steps/s, {r['updates']} updates ({r['updates_per_s']}/s)",
+             f"  peak process tree: RSS {r['peak_tree_rss_mb']} MB, PSS {r['peak_tree_pss_mb']} MB",
+             f"  {'process':<28}{'count':>6}{'peak RSS MB':>13}{'peak PSS MB':>13}"]
+    for label, p in r["processes"].items():
+        lines.append(f"  {label:<28}{p['count']:>6}{p['rss_mb']:>13}{p['pss_mb']:>13}")
+    return "\n".join(lines)
+
+
+def bench_run_main(args: argparse.Namespace) -> int:
+    result = bench_run(args.train_args)
+    print(json.dumps(result, indent=2) if args.json else render(result))
+    return 0 if result.get("rc") == 0 else 1
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("run", help="a whole local run measured from outside: start-up, env steps/s, memory per process",
+                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p.add_argument("--train-args", default=DEFAULT_TRAIN_ARGS, help="arguments for `laneshift train --local`")
+    p.add_argument("--json", action="store_true", help="print the result as one JSON object")
+    p.set_defaults(func=bench_run_main)
