@@ -68,6 +68,8 @@ def process_label(pid: int, launcher: int) -> str:
                         ("monitor.py", "ray monitor"), ("dashboard.py", "ray dashboard"), ("default_worker.py", "ray-worker (idle)")):
         if part in cmd:
             return label
+    if "os.getppid()==p" in cmd:
+        return "temp-dir watcher"  # the launcher's: removes Ray's temp dir if the launcher is killed
     return Path(cmd.split()[0]).name if cmd.strip() else "?"
 
 
@@ -112,6 +114,32 @@ class TreeSampler(threading.Thread):
         return dict(sorted(out.items(), key=lambda kv: -kv[1]["pss_mb"]))
 
 
+_API = re.compile(r"replay inspection API (http://\S+)/stats")
+
+
+class FirstInsert(threading.Thread):
+    """Polls the replay server's HTTP /stats every 0.1 s until it holds a transition; records when."""
+
+    def __init__(self, url: str, started: float):
+        super().__init__(daemon=True, name="first-insert")
+        self.url, self.started, self.seconds = url, started, None
+        self.start()
+
+    def run(self) -> None:
+        import urllib.request
+
+        deadline = time.monotonic() + 300
+        while time.monotonic() < deadline:
+            try:
+                with urllib.request.urlopen(self.url + "/stats", timeout=2) as reply:
+                    if json.loads(reply.read())["tables"]["online"]["inserted"] > 0:
+                        self.seconds = round(time.monotonic() - self.started, 2)
+                        return
+            except (OSError, ValueError, KeyError):
+                pass
+            time.sleep(0.1)
+
+
 def bench_run(train_args: str, timeout_s: float = 900.0) -> dict:
     run_dir = Path(tempfile.mkdtemp(prefix="lsbench-")) / "run"
     cmd = [sys.executable, "-m", "laneshift", "train", "--local", "--run-dir", str(run_dir), *shlex.split(train_args)]
@@ -120,10 +148,15 @@ def bench_run(train_args: str, timeout_s: float = 900.0) -> dict:
                             env={**os.environ, "PYTHONUNBUFFERED": "1"})
     sampler = TreeSampler(proc.pid)
     sampler.start()
-    first_step_s, tail = None, []
+    first_step_s, tail, first_insert, started_line = None, [], None, ""
     try:
         for line in proc.stdout:
             tail = (tail + [line])[-40:]
+            api = _API.search(line)
+            if api and first_insert is None:
+                first_insert = FirstInsert(api.group(1), started)
+            if line.startswith("train: started in"):
+                started_line = line.strip()
             m = _STEPS.search(line)
             if first_step_s is None and m and int(m.group(1).replace(",", "")) > 0:
                 first_step_s = round(time.monotonic() - started, 1)
@@ -142,21 +175,46 @@ def bench_run(train_args: str, timeout_s: float = 900.0) -> dict:
         return {"rc": rc, "error": "no summary.json", "log_tail": "".join(tail)}
     learner = summary.get("learner", {})
     return {
-        "train_args": train_args, "rc": rc, "wall_s": wall, "first_env_step_s": first_step_s,
+        "train_args": train_args, "rc": rc, "wall_s": wall,
+        # From the command to the first transition the replay server stored (its HTTP /stats polled
+        # every 0.1 s), and to the first progress line that counts env steps (the learner counts
+        # them from finished episodes, so this is later by about one episode and one log interval).
+        "first_stored_s": first_insert.seconds if first_insert else None, "first_progress_s": first_step_s,
+        "startup_line": started_line,
         "env_steps": summary["env_steps"], "run_s": summary["wall_s"],
         "env_steps_per_s": round(summary["env_steps"] / max(summary["wall_s"], 1e-6), 1),
         "updates": learner.get("updates"), "updates_per_s": learner.get("updates_per_s"),
+        **training_rate(run_dir),
         "peak_tree_rss_mb": round(sampler.peak_rss_kb / 1024), "peak_tree_pss_mb": round(sampler.peak_pss_kb / 1024),
         "processes": sampler.by_label(), "run_dir": str(run_dir),
     }
+
+
+def training_rate(run_dir: Path) -> dict:
+    """Env steps/s and updates/s while training: from the learner's first record that counts env
+    steps to its last (``metrics.jsonl``), so Ray's start and the final stop are left out."""
+    recs = []
+    try:
+        for line in (run_dir / "metrics.jsonl").read_text().splitlines():
+            rec = json.loads(line)
+            if rec.get("kind") == "learner" and rec.get("env_steps", 0) > 0:
+                recs.append((float(rec["time"]), int(rec["env_steps"]), int(rec.get("updates", 0))))
+    except (OSError, ValueError):
+        return {}
+    if len(recs) < 2 or recs[-1][0] <= recs[0][0]:
+        return {}
+    span = recs[-1][0] - recs[0][0]
+    return {"training_s": round(span, 1), "training_env_steps_per_s": round((recs[-1][1] - recs[0][1]) / span, 1),
+            "training_updates_per_s": round((recs[-1][2] - recs[0][2]) / span, 1)}
 
 
 def render(r: dict) -> str:
     if "error" in r:
         return f"bench run: {r['error']} (rc {r['rc']})\n{r.get('log_tail', '')}"
     lines = [f"laneshift train --local {r['train_args']}",
-             f"  first env step {r['first_env_step_s']} s after the command; run {r['run_s']} s, "
-             f"{r['env_steps_per_s']} env steps/s, {r['updates']} updates ({r['updates_per_s']}/s)",
+             f"  first transition stored {r['first_stored_s']} s after the command ({r['startup_line']}); run {r['run_s']} s, "
+             f"{r['env_steps_per_s']} env steps/s overall; while training {r.get('training_env_steps_per_s')} env steps/s, "
+             f"{r.get('training_updates_per_s')} updates/s ({r['updates']} updates)",
              f"  peak process tree: RSS {r['peak_tree_rss_mb']} MB, PSS {r['peak_tree_pss_mb']} MB",
              f"  {'process':<28}{'count':>6}{'peak RSS MB':>13}{'peak PSS MB':>13}"]
     for label, p in r["processes"].items():

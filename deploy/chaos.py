@@ -168,8 +168,8 @@ FAULTS: dict[str, dict] = {
                                 "overrides": {"replay.checkpoint_every_s": 0.5}},
     # The run dir on a 6 MiB tmpfs that fills up: checkpoints fail (counted, retried), training goes on.
     "disk-full": {"disk_mb": 6, "overrides": {"replay.checkpoint_every_s": 2, "replay.capacity": 60_000}},
-    # The run dir read-only for 5 s (a bind mount remounted ro: EROFS even for root), then writable again.
-    "unwritable": {"read_only_s": 5.0, "overrides": {"replay.checkpoint_every_s": 1}},
+    # The run dir read-only from an eighth to half of the budget (at most 10 s): over before the run ends (a bind mount remounted ro: EROFS even for root), then writable again.
+    "unwritable": {"read_only_s": 10.0, "overrides": {"replay.checkpoint_every_s": 1}},
     # 5,000 actor names, one one-row batch each, from a foreign client, while stats are queried.
     "stats-flood": {"flood_actors": 5000},
     # The launcher itself: SIGTERM (`ray job stop`, systemd, Kubernetes) or kill -9, then
@@ -205,7 +205,7 @@ def run_fault(name: str, work: Path, env_steps: int, demos: str | None) -> dict:
 
     demo_before = _digest([demos]) if demos else ""
     if spec.get("read_only_s"):
-        inject = ReadOnlyRunDir(run_dir, at_steps=env_steps // 4, seconds=spec["read_only_s"])
+        inject = ReadOnlyRunDir(run_dir, at_steps=env_steps // 8, until_steps=env_steps // 2, seconds=spec["read_only_s"])
     elif spec.get("flood_actors"):
         inject = StatsFlood(run_dir, at_steps=env_steps // 4, actors=spec["flood_actors"])
     else:
@@ -267,12 +267,14 @@ def _write_failures(summary: dict, replay: dict) -> dict[str, int]:
 
 @dataclass(eq=False)
 class ReadOnlyRunDir(threading.Thread):
-    """Makes the run dir read-only for ``seconds`` once the run made ``at_steps`` env steps: a bind
-    mount of it onto itself, remounted ro (EROFS even for root; files already open keep writing,
-    as on a filesystem remounted read-only under a running job), then unmounted."""
+    """Makes the run dir read-only once the run made ``at_steps`` env steps, until ``until_steps``
+    (at most ``seconds``): a bind mount of it onto itself, remounted ro (EROFS even for root; files
+    already open keep writing, as on a filesystem remounted read-only under a running job), then
+    unmounted, so the run ends on a writable dir and its summary shows what was counted."""
 
     run_dir: Path
     at_steps: int
+    until_steps: int  # writable again once the run made this many env steps, or after ``seconds``
     seconds: float
     timeout_s: float = 300.0
     struck: bool = False
@@ -300,7 +302,10 @@ class ReadOnlyRunDir(threading.Thread):
             ro = subprocess.run(["mount", "-o", "remount,bind,ro", where], capture_output=True, text=True)
             self.struck = ro.returncode == 0
             self.error = ro.stderr.strip()
-            self._halt.wait(self.seconds)
+            until = time.monotonic() + self.seconds
+            while time.monotonic() < until and not self._halt.is_set() \
+                    and logged_env_steps(self.run_dir)[0] < self.until_steps:
+                time.sleep(0.05)
         finally:
             subprocess.run(["umount", "-l", where], check=False)
         before, back = logged_env_steps(self.run_dir), time.monotonic()

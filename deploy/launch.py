@@ -641,9 +641,15 @@ def _summary(run: Run, why: str, wall: float, out: TextIO) -> dict:
         result["eval"] = evaluate_checkpoint(final, cfg.env, episodes=cfg.train.eval_episodes,
                                              seed=cfg.train.seed + 12345)
         lines.append(f"greedy eval     {format_result(result['eval'])}")
-    lines += [f"run dir         {run_dir}", f"checkpoint      {final}", f"tensorboard     tensorboard --logdir {run_dir / 'tb'}"]
+    lines += [f"run dir         {run_dir}", f"checkpoint      {final}", f"tensorboard     {_tensorboard_command()} --logdir {run_dir / 'tb'}"]
     print("\n".join(lines), file=out, flush=True)
     return result
+
+
+def _tensorboard_command() -> str:
+    """``tensorboard`` as the user can run it: the one beside this Python (a venv not activated)."""
+    beside = Path(sys.executable).parent / "tensorboard"
+    return str(beside) if beside.exists() and not shutil.which("tensorboard") else "tensorboard"
 
 
 def _fmt(v: object) -> str:

@@ -12,6 +12,14 @@ Rehearsal (the paper's 予行型): phase 1 runs ``phase1_updates`` updates on th
 starts a new training run from that network (fresh optimizer, target = online). ``dqfd`` has the
 same phase 1 (DQfD's pre-training); its phase 2 keeps the demo region in the buffer.
 
+Metrics (``learner/metrics.py``): TensorBoard scalars at env steps (``learner/*``: every
+``dqn.UpdateMetrics`` of the interval's last update, update rate, weights version; ``train/*``: the
+workers' episodes; ``replay/*``; ``actors/*``: version lag; ``episode/*``: one point per episode;
+``eval/*``: the greedy evaluation every ``train.eval_every`` env steps); phase 1, which has no env
+steps, logs the same under ``pretrain/`` at update counts. The env-step count is the largest of the
+replay server's count, the workers' episode reports and the count restored with the learner state,
+so TensorBoard's step never goes back, on a restart or ``--resume`` either.
+
 Run it with ``laneshift learner --config run.yaml``.
 """
 
@@ -31,10 +39,14 @@ from laneshift import transport, wire
 from laneshift.config import RunConfig, worker_budgets, worker_names  # noqa: F401 - re-exported
 from laneshift.envspec import EnvSpec, env_spec
 
-from .dqn import DoubleDQN
+from .dqn import METRIC_NAMES, DoubleDQN
 from .links import LearnerLinks, ZenohLearnerLinks
-from .metrics import MetricsLog
+from .metrics import GreedyEval, MetricsLog
 from .weights import save_checkpoint, to_wire
+
+
+#: How long the end of a run waits for a running greedy evaluation (train.eval_every) before cancelling it.
+FINAL_EVAL_WAIT_S = 10.0
 
 
 class Learner:
@@ -45,15 +57,25 @@ class Learner:
         self.agent = DoubleDQN(spec.schema.obs_shape, spec.schema.n_actions, cfg.learner)
         self.workers = worker_names(cfg.actor.workers)
         self.metrics = MetricsLog(self.run_dir)
-        self.metrics.hparams(cfg.to_dict())
+        self.metrics.config(cfg.to_dict())
         self.version = 0
         self.phase = 1 if cfg.replay.pretrains else 0
         # Running statistics for logs.
         self.returns: collections.deque[float] = collections.deque(maxlen=100)
         self.lengths: collections.deque[float] = collections.deque(maxlen=100)
         self.crashes: collections.deque[float] = collections.deque(maxlen=100)
+        self.achieved: collections.deque[float] = collections.deque(maxlen=100)
         self.episodes = 0
         self.actor_steps: dict[str, int] = {}
+        self.actor_epsilon: dict[str, float] = {}  # each worker's epsilon at its newest episode
+        # TensorBoard's step: the run's env steps, never decreasing (restored with the learner state).
+        self.env_steps = 0
+        t = cfg.train
+        # The same episode seeds as the final summary's evaluation (deploy/launch.py: train.seed + 12345).
+        self.evaluator = GreedyEval(cfg.env, t.eval_every, t.periodic_eval_episodes, t.seed + 12345,
+                                    spec.schema.obs_shape, spec.schema.n_actions, cfg.learner.hidden,
+                                    cfg.learner.dueling) if t.eval_every else None
+        self.last_eval: dict | None = None
         self.last_update: Mapping[str, float] = {}  # the last update's metrics (dqn.UpdateMetrics: read lazily)
         self.replay_stats: dict = {}
         self.stop_reason: dict | None = None
@@ -89,6 +111,7 @@ class Learner:
         self.version = max(int(state["version"]), published) + 1
         self.phase = int(state["phase"])
         self.episodes = int(state["episodes"])
+        self.env_steps = int(state.get("env_steps", 0))  # absent in states written before it was kept
         info = {"updates": self.agent.updates, "version": self.version, "phase": self.phase,
                 "path": str(self.state_path)}
         print(f"learner: restored {self.state_path} (update {self.agent.updates}, phase {self.phase}); "
@@ -98,7 +121,8 @@ class Learner:
     def save_state(self) -> bool:
         """Write the full training state atomically; a failed write is counted and retried later."""
         state = {"agent": self.agent.state_dict(), "version": torch.tensor(self.version),
-                 "phase": torch.tensor(self.phase), "episodes": torch.tensor(self.episodes)}
+                 "phase": torch.tensor(self.phase), "episodes": torch.tensor(self.episodes),
+                 "env_steps": torch.tensor(self.env_steps)}
         tmp = self.state_path.with_suffix(".tmp")
         try:
             self.state_path.parent.mkdir(parents=True, exist_ok=True)
@@ -161,11 +185,19 @@ class Learner:
                 self._log()
                 self._maybe_save_state()
                 next_log = time.monotonic() + 1.0
-        self._log()
+        self._finish()
+
+    def _finish(self) -> None:
+        """The end of a run: last metrics, checkpoints and state, HParams, files closed."""
+        self._log()  # starts the last evaluation if train.eval_every env steps passed since the previous one
+        if self.evaluator is not None:  # the evaluation running now is waited for, briefly, then cancelled
+            self.evaluator.close(timeout=FINAL_EVAL_WAIT_S)
+            self._log_eval(self.evaluator.take())
         self.checkpoint("latest")
         self.checkpoint("final")
         self.save_state()
         self.links.publish_stats(wire.encode_json({**self._status(), "done": True}))
+        self.metrics.hparams(self.cfg.to_dict(), self._final_metrics(), self.env_steps)
         self.metrics.close()
         print(f"learner: stopped after {self.agent.updates} updates, version {self.version}", flush=True)
 
@@ -286,15 +318,30 @@ class Learner:
                 print(f"learner: episode {self.episodes} returned {ret:.3f} >= train.stop_return "
                       f"{self.cfg.train.stop_return}: stopping the run", flush=True)
                 self.links.stop_all()
+            actor = str(ep.get("actor"))
+            crashed = float(bool(ep.get("crashed", False)))
+            on_target = float(bool(ep.get("on_target_lane", False)))
             self.returns.append(ret)
             self.lengths.append(length)
-            self.crashes.append(float(bool(ep.get("crashed", False))))
-            self.actor_steps[str(ep.get("actor"))] = int(ep.get("env_steps", 0))
-            self.metrics.scalars(self.episodes, {
-                "return": ret, "length": length, "crashed": float(bool(ep.get("crashed", False))),
-                "on_target_lane": float(bool(ep.get("on_target_lane", False))),
-                "epsilon": float(ep.get("epsilon", 0.0)),
-                "version_lag": float(self.version - int(ep.get("weights_version", 0)))}, kind="episode")
+            self.crashes.append(crashed)
+            self.achieved.append(on_target * (1.0 - crashed))
+            # A worker's count only grows (a restarted worker resumes from what the replay server stored).
+            self.actor_steps[actor] = max(self.actor_steps.get(actor, 0), int(ep.get("env_steps", 0)))
+            self.actor_epsilon[actor] = float(ep.get("epsilon", 0.0))
+            step = self._note_env_steps()
+            values = {"return": ret, "length": length, "crashed": crashed, "on_target_lane": on_target,
+                      "epsilon": self.actor_epsilon[actor],
+                      "version_lag": float(self.version - int(ep.get("weights_version", 0)))}
+            self.metrics.write("episode", step, {**values, "episode": self.episodes, "actor": actor,
+                                                 "env_steps": step},
+                               {f"episode/{k}": v for k, v in values.items()})
+
+    def _note_env_steps(self) -> int:
+        """The run's env steps so far as this learner knows them (TensorBoard's step): never less
+        than before, whichever of the replay server's count and the workers' reports is ahead."""
+        stored = int(self.replay_stats.get("actors_total", {}).get("env_steps", 0))
+        self.env_steps = max(self.env_steps, stored, sum(self.actor_steps.values()))
+        return self.env_steps
 
     def _status(self) -> dict:
         now = time.monotonic()
@@ -311,7 +358,12 @@ class Learner:
             "return_mean": float(np.mean(self.returns)) if self.returns else None,
             "length_mean": float(np.mean(self.lengths)) if self.lengths else None,
             "crash_rate": float(np.mean(self.crashes)) if self.crashes else None,
-            "loss": self.last_update.get("loss"), "q_mean": self.last_update.get("q_mean"),
+            # Lane changes only: the LKA plant has no target lane.
+            "achievement_rate": float(np.mean(self.achieved)) if self.achieved and not self.cfg.env.is_lka else None,
+            "epsilon": float(np.mean(list(self.actor_epsilon.values()))) if self.actor_epsilon else None,
+            # The interval's last update (dqn.METRIC_NAMES: loss, q_mean, grad_norm, td_abs, margin_loss,
+            # bc_loss), read back here, once per log interval; None before the first update.
+            **{k: self.last_update.get(k) for k in METRIC_NAMES},
             "replay_size": self.replay_stats.get("tables", {}).get("online", {}).get("size"),
             "demo_share_samples": self.replay_stats.get("demo_share_recent_samples"),
             "version_lag": {a: self.version - int(s.get("last_version", 0)) for a, s in actors.items()},
@@ -331,7 +383,69 @@ class Learner:
         if self.replay_stats:
             flat["replay_demo_share_buffer"] = self.replay_stats.get("demo_share_buffer", 0.0)
             flat.update({f"replay_{k}": v for k, v in self.replay_stats.get("rates", {}).items()})
-        self.metrics.scalars(self.agent.updates, flat)
+        scalars = self._tb_scalars(status)
+        step = self._note_env_steps()
+        if self.phase == 1:  # demo-only updates, no env steps yet: the update count is the step
+            step, scalars = self.agent.updates, {f"pretrain/{tag}": v for tag, v in scalars.items()}
+        self.metrics.write("learner", step, flat, scalars)
+        self._eval_tick()
+
+    def _tb_scalars(self, status: dict) -> dict[str, float | None]:
+        """TensorBoard's tags for one log interval (None values are left out by MetricsLog)."""
+        tb: dict[str, float | None] = {f"learner/{k}": status.get(k) for k in METRIC_NAMES}
+        tb.update({f"learner/{k}": status[k] for k in ("updates", "updates_per_s", "version", "phase")})
+        tb.update({f"train/{k}": status[k] for k in ("env_steps_per_s", "episodes", "return_mean", "length_mean",
+                                                      "crash_rate", "achievement_rate", "epsilon")})
+        lags = status["version_lag"]
+        tb.update({f"actors/version_lag_{a}": lag for a, lag in lags.items()})
+        if lags:
+            tb["actors/version_lag_max"] = max(lags.values())
+        r = self.replay_stats
+        if r:
+            online = r.get("tables", {}).get("online", {})
+            total = r.get("actors_total", {})
+            size, capacity = online.get("size"), online.get("capacity")
+            tb.update({"replay/size": size, "replay/fill": size / capacity if size is not None and capacity else None,
+                       "replay/demo_share_buffer": r.get("demo_share_buffer"),
+                       "replay/demo_share_samples": r.get("demo_share_recent_samples"),
+                       "replay/sampled_rows": r.get("sampled_rows"), "replay/env_steps": total.get("env_steps"),
+                       "replay/lost_items": total.get("lost_items")})
+            tb.update({f"replay/{k}": v for k, v in r.get("rates", {}).items()})
+        return tb
+
+    # ------------------------------------------------------------------ evaluation during training
+
+    def _eval_tick(self) -> None:
+        """Log a finished greedy evaluation; start the next when train.eval_every env steps passed."""
+        if self.evaluator is None:
+            return
+        self._log_eval(self.evaluator.take())
+        if self.phase != 1 and self.evaluator.due(self.env_steps):
+            self.evaluator.start(self.agent.online, self.env_steps, updates=self.agent.updates, version=self.version)
+
+    def _log_eval(self, result: dict | None) -> None:
+        if result is None:
+            return
+        self.last_eval = result
+        self.metrics.write("eval", result["env_steps"], result,
+                           {f"eval/{k}": result.get(k) for k in ("survival_rate", "achievement_rate", "return_mean",
+                                                                 "return_std", "length_mean", "eval_s")})
+        text = f"survival {result['survival_rate']:.0%}"
+        if "achievement_rate" in result:
+            text += f", achievement {result['achievement_rate']:.0%}"
+        print(f"learner: greedy eval at {result['env_steps']:,} env steps (version {result.get('version')}): "
+              f"{text}, return {result['return_mean']:.2f} over {result['episodes']} episodes", flush=True)
+
+    def _final_metrics(self) -> dict[str, float | None]:
+        """The run's final numbers for the HParams dashboard."""
+        s = self.last_status
+        out = {f"final/{k}": s.get(k) for k in ("return_mean", "length_mean", "crash_rate", "achievement_rate")}
+        out.update({"final/updates": self.agent.updates, "final/env_steps": self.env_steps,
+                    "final/episodes": self.episodes})
+        if self.last_eval:
+            out.update({f"final/eval_{k}": self.last_eval.get(k)
+                        for k in ("survival_rate", "achievement_rate", "return_mean")})
+        return out
 
 
 def _read_int(path: Path) -> int:

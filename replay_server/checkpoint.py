@@ -186,9 +186,16 @@ def restore_checkpoint(core: "ReplayCore", directory: str | Path) -> int:
         # its items as lost, and a restarted worker makes exactly the missing steps again.
         for name, (last_seq, env_steps) in resume.items():
             if name in core.actors:
-                core.actors[name]["last_seq"] = last_seq
+                stats = core.actors[name]
+                # Its counters as of that batch: the batches after it (in the stats, not in the
+                # table) are sent again by a resumed worker or counted lost, never stored twice.
+                after = [(seq, n) for seq, (_, n) in history.get(name, {}).items() if seq > last_seq]
+                for key in ("batches", "items", "stored"):
+                    stats[key] = max(0, int(stats.get(key, 0)) - (len(after) if key == "batches" else
+                                                                  sum(n for _, n in after)))
+                stats["last_seq"] = last_seq
                 if env_steps is not None:
-                    core.actors[name]["env_steps"] = env_steps
+                    stats["env_steps"] = env_steps
         if core.cfg.pretrains and meta.get("mode") == core.mode:
             core.phase = max(core.phase, int(meta.get("phase", core.phase)))
         # The restored items count as already sampled at the configured ratio: counting them as

@@ -256,3 +256,23 @@ def test_per_actor_state_is_bounded_and_idle_actors_are_evicted(monkeypatch):
     total = core.stats()["actors_total"]
     assert total["stored"] == 70 and total["batches"] == 7 and total["lost_items"] == 0
     assert len(set(core._actor_index.values())) == 4  # row indices reused, never more than MAX_ACTORS
+
+
+def test_restored_counters_match_the_resume_point_so_nothing_is_stored_twice(tmp_path, monkeypatch):
+    """A batch stored after the copy passed its rows is in the stats, not the table: a resumed
+    worker sends it again, and the actor's stored count must not hold it twice."""
+    import laneshift.replay_server.checkpoint as ckpt
+
+    core = ReplayCore(ReplayConfig(capacity=100, min_size=1), SCHEMA)
+    for seq in range(3):  # rows 0-29
+        core.ingest(batch(seq))
+    monkeypatch.setattr(ckpt, "CHUNK_BYTES", 1)  # one row a chunk
+    core._lock = _CopyHook(core._lock, after=31, action=lambda: core.ingest(batch(3)))  # rows 30-39, passed already
+    write_checkpoint(core, tmp_path / "ckpt")
+    fresh = ReplayCore(ReplayConfig(capacity=100, min_size=1), SCHEMA)
+    assert restore_checkpoint(fresh, tmp_path / "ckpt") == 30
+    state = fresh.actor_state("w0")
+    assert state == {"env_steps": 30, "next_seq": 3, "known": 1}
+    assert fresh.ingest(batch(3)) is None  # the resumed worker sends batch 3 again
+    w0 = fresh.actors["w0"]
+    assert (w0["stored"], w0["items"], w0["batches"], w0["lost_items"]) == (40, 40, 4, 0)

@@ -288,6 +288,12 @@ class TrainConfig:
     run_dir: str = "runs/latest"
     log_every_s: float = 2.0
     eval_episodes: int = 10  # greedy episodes in the final summary (0 = skip)
+    # Greedy evaluation during training, every this many env steps (0 = off): the learner copies its
+    # current network to a background thread with its own env and logs survival, achievement and
+    # return to TensorBoard (eval/*) and metrics.jsonl (kind "eval"); training goes on meanwhile.
+    # The end of the run evaluates once more if a multiple was passed since (waiting up to 10 s).
+    eval_every: int = 0
+    periodic_eval_episodes: int = 5  # greedy episodes per evaluation during training (train.eval_every)
     # MATLAB's stop criterion: end the run as soon as an episode's return reaches this (inf = never).
     stop_return: float = math.inf
     # Scripted episodes in the default demo shard (demo modes without replay.demo_paths);
@@ -302,6 +308,9 @@ class TrainConfig:
         _check(self.parallel in ("async", "sync"), "train.parallel", "must be async or sync", self.parallel)
         _check(self.log_every_s > 0, "train.log_every_s", "must be > 0", self.log_every_s)
         _check(self.eval_episodes >= 0, "train.eval_episodes", "must be >= 0", self.eval_episodes)
+        _check(self.eval_every >= 0, "train.eval_every", "must be >= 0 (0 = off)", self.eval_every)
+        _check(self.periodic_eval_episodes >= 1, "train.periodic_eval_episodes", "must be >= 1",
+               self.periodic_eval_episodes)
         _check(not math.isnan(self.stop_return), "train.stop_return", "must be a number (inf = never)",
                self.stop_return)
         _check(self.seed >= 0, "train.seed", "must be >= 0", self.seed)

@@ -1,0 +1,272 @@
+"""TensorBoard output of the learner: every update metric and the loop's own, at env-step steps
+that never go back (a resumed learner included), HParams at the end, and the greedy evaluation
+during training (``train.eval_every``) on the LKA plant.
+
+In process, no Ray, no zenoh: a Learner over fake links fed synthetic batches and episode
+records, event files read back with TensorBoard's own reader.
+May import: the learner, the contract, the in-process runner, tensorboard's event reader.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+
+import numpy as np
+import pytest
+import torch
+
+from laneshift import wire
+from laneshift.config import EnvConfig, load_run_config
+from laneshift.envspec import EnvSpec
+from laneshift.learner.dqn import METRIC_NAMES
+from laneshift.learner.loop import Learner
+from laneshift.learner.metrics import GreedyEval
+from laneshift.learner.networks import build_q_network
+
+event_accumulator = pytest.importorskip("tensorboard.backend.event_processing.event_accumulator")
+
+torch.set_num_threads(1)
+
+OBS, ACTIONS = (4,), 3
+SPEC = EnvSpec("fake", wire.TransitionSchema(OBS, "<f4", ACTIONS), ())
+SMALL = {"learner.hidden": "16", "learner.batch_size": 8, "learner.prefetch": 2, "learner.publish_every": 2,
+         "learner.device": "cpu", "learner.checkpoint_every_s": 0}
+
+
+class FakeLinks:
+    """LearnerLinks with a replay server that hands out random batches and reports ``env_steps``."""
+
+    def __init__(self, env_steps: int = 0):
+        self.env_steps, self.episodes, self.status = env_steps, [], {}
+        self.rng = np.random.default_rng(0)
+        self.sampled = 0
+
+    def sample(self, req: wire.SampleRequest) -> wire.SampledBatch:
+        n = req.batch_size * req.num_batches
+        self.sampled += n
+        return wire.SampledBatch(
+            obs=self.rng.standard_normal((n, *OBS), dtype=np.float32), action=self.rng.integers(0, ACTIONS, n),
+            reward=self.rng.standard_normal(n, dtype=np.float32),
+            next_obs=self.rng.standard_normal((n, *OBS), dtype=np.float32),
+            terminated=np.zeros(n, np.uint8), steps=np.ones(n, np.uint8), is_demo=np.zeros(n, np.uint8),
+            index=np.arange(n), weight=np.ones(n, np.float32), num_batches=req.num_batches, info={})
+
+    def replay_stats(self) -> dict:
+        return {"tables": {"online": {"size": min(self.env_steps, 1000), "capacity": 1000}},
+                "actors": {"w0": {"last_version": 0}, "w1": {"last_version": 0}},
+                "actors_total": {"env_steps": self.env_steps, "lost_items": 0},
+                "rates": {"inserts_per_s": 10.0, "samples_per_s": 80.0}, "demo_share_buffer": 0.0,
+                "demo_share_recent_samples": 0.0, "sampled_rows": self.sampled}
+
+    def replay_control(self, body: dict) -> dict:
+        return {"ok": True}
+
+    def publish_weights(self, payload: bytes) -> None:
+        pass
+
+    def send_priorities(self, payload: bytes) -> None:
+        pass
+
+    def publish_stats(self, payload: bytes) -> None:
+        self.status = wire.decode_json(payload)
+
+    def take_episodes(self) -> list[bytes]:
+        out, self.episodes = self.episodes, []
+        return out
+
+    def stop_requested(self) -> bool:
+        return False
+
+    def stop_all(self) -> None:
+        pass
+
+    def episode(self, actor: str, env_steps: int) -> None:
+        self.episodes.append(wire.encode_json({"actor": actor, "return": -1.5, "length": 40, "crashed": False,
+                                               "on_target_lane": True, "weights_version": 0, "phase": 0,
+                                               "env_steps": env_steps, "epsilon": 0.5}))
+
+
+def _learner(run_dir, links, **overrides) -> Learner:
+    cfg = load_run_config(overrides={**SMALL, "train.run_dir": str(run_dir), **overrides})
+    return Learner(cfg, SPEC, links, threading.Event())
+
+
+def _drive(learner: Learner, links: FakeLinks, rounds: int, replay_steps: int, actor_steps: int) -> None:
+    """``rounds`` log intervals: the replay server's count grows by ``replay_steps`` each, and each
+    worker (w0, w1) reports an episode ``actor_steps`` further on."""
+    for _ in range(rounds):
+        links.env_steps += replay_steps
+        for actor in ("w0", "w1"):
+            links.episode(actor, learner.actor_steps.get(actor, 0) + actor_steps)
+        learner._async_step()
+        learner._log()
+
+
+def _scalars(tb_dir) -> event_accumulator.EventAccumulator:
+    acc = event_accumulator.EventAccumulator(str(tb_dir), size_guidance={event_accumulator.SCALARS: 0})
+    acc.Reload()
+    return acc
+
+
+def _steps(acc, tag: str) -> list[int]:
+    return [e.step for e in acc.Scalars(tag)]
+
+
+def test_every_metric_at_env_step_steps_that_never_go_back_across_a_resume(tmp_path):
+    links = FakeLinks()
+    learner = _learner(tmp_path, links)
+    learner.publish()
+    _drive(learner, links, rounds=4, replay_steps=100, actor_steps=40)
+    learner._finish()
+    first_end = learner.env_steps
+    assert first_end == 400  # the replay server's count (ahead of the episode reports here)
+
+    # --resume: the learner state brings the env-step count back even while the replay server
+    # (here: a fresh one) and the workers report less.
+    links2 = FakeLinks(env_steps=0)
+    again = _learner(tmp_path, links2)
+    assert again.restored_from and again.env_steps == first_end and again.agent.updates == learner.agent.updates
+    again.publish()
+    _drive(again, links2, rounds=3, replay_steps=50, actor_steps=30)
+    links2.env_steps = first_end + 500  # the replay server catches up, then leads
+    _drive(again, links2, rounds=2, replay_steps=100, actor_steps=30)
+    again._finish()
+
+    acc = _scalars(tmp_path / "tb")
+    tags = set(acc.Tags()["scalars"])
+    expected = ({f"learner/{k}" for k in (*METRIC_NAMES, "updates", "updates_per_s", "version", "phase")}
+                | {f"train/{k}" for k in ("env_steps_per_s", "episodes", "return_mean", "length_mean", "crash_rate",
+                                          "achievement_rate", "epsilon")}
+                | {"actors/version_lag_w0", "actors/version_lag_w1", "actors/version_lag_max",
+                   "replay/size", "replay/fill", "replay/demo_share_buffer", "replay/demo_share_samples",
+                   "replay/sampled_rows", "replay/env_steps", "replay/lost_items", "replay/inserts_per_s",
+                   "replay/samples_per_s"}
+                | {f"episode/{k}" for k in ("return", "length", "crashed", "on_target_lane", "epsilon", "version_lag")})
+    assert expected <= tags, sorted(expected - tags)
+    for tag in tags:
+        steps = _steps(acc, tag)
+        assert steps == sorted(steps), (tag, steps)
+    # Both runs' points are there (a step going back would make the reader drop the older ones).
+    loss_steps = _steps(acc, "learner/loss")
+    assert len(loss_steps) == 4 + 1 + 5 + 1  # each _log, and _finish's
+    assert loss_steps[:5] == [100, 200, 300, 400, 400]
+    assert min(loss_steps[5:]) == first_end and loss_steps[-1] == first_end + 700
+    assert _steps(acc, "learner/updates") == loss_steps
+    # The update count is a value, not the axis.
+    updates = [e.value for e in acc.Scalars("learner/updates")]
+    assert updates == sorted(updates) and updates[-1] == again.agent.updates
+    grad = [e.value for e in acc.Scalars("learner/grad_norm")]
+    assert all(np.isfinite(grad)) and max(grad) > 0
+    assert [e.value for e in acc.Scalars("learner/margin_loss")] == [0.0] * len(loss_steps)
+
+    # metrics.jsonl keeps kind, env_steps, updates and time; "step" is TensorBoard's step.
+    records = [json.loads(line) for line in (tmp_path / "metrics.jsonl").read_text().splitlines()]
+    learner_records = [r for r in records if r["kind"] == "learner"]
+    assert all({"env_steps", "updates", "time", "step", *METRIC_NAMES} <= set(r) for r in learner_records)
+    assert [r["step"] for r in learner_records] == loss_steps
+    episodes = [r for r in records if r["kind"] == "episode"]
+    assert len(episodes) == 2 * (4 + 5) and [r["episode"] for r in episodes] == list(range(1, 19))
+
+
+def test_hparams_hold_the_flattened_config_and_final_metrics(tmp_path):
+    from tensorboard.plugins.hparams import plugin_data_pb2
+
+    links = FakeLinks()
+    learner = _learner(tmp_path, links, **{"learner.lr": 0.001})
+    learner.publish()
+    _drive(learner, links, rounds=2, replay_steps=100, actor_steps=50)
+    learner._finish()
+
+    acc = event_accumulator.EventAccumulator(str(tmp_path / "tb" / "hparams"))
+    acc.Reload()
+    content = acc.PluginTagToContent("hparams")
+    start = plugin_data_pb2.HParamsPluginData.FromString(content["_hparams_/session_start_info"]).session_start_info
+    hp = start.hparams
+    assert hp["learner.lr"].number_value == pytest.approx(0.001)
+    assert hp["learner.hidden"].string_value == "16"
+    assert hp["env.scenario"].string_value == "straight"
+    assert hp["train.stop_return"].string_value == "inf"  # not a number TensorBoard's JSON could carry
+    assert hp["learner.double"].bool_value is True
+    experiment = plugin_data_pb2.HParamsPluginData.FromString(content["_hparams_/experiment"]).experiment
+    metrics = {m.name.tag for m in experiment.metric_infos}
+    assert {"final/return_mean", "final/crash_rate", "final/updates", "final/env_steps"} <= metrics
+    final = {tag: acc.Scalars(tag)[-1] for tag in acc.Tags()["scalars"]}
+    assert final["final/env_steps"].value == 200 and final["final/env_steps"].step == 200
+    # The text config stays too.
+    main = event_accumulator.EventAccumulator(str(tmp_path / "tb"))
+    main.Reload()
+    assert "config/text_summary" in main.Tags()["tensors"]
+
+
+def test_rehearsal_phase1_logs_under_pretrain_at_update_steps(tmp_path):
+    links = FakeLinks()
+    learner = _learner(tmp_path, links, **{"replay.demo_mode": "rehearsal", "learner.phase1_updates": 1000})
+    assert learner.phase == 1
+    for _ in range(3):
+        learner._updates(links.sample(wire.SampleRequest(8, 2)))
+        learner._log()
+    learner.metrics.close()
+    acc = _scalars(tmp_path / "tb")
+    assert _steps(acc, "pretrain/learner/loss") == [2, 4, 6]
+    assert not any(t.startswith("learner/") for t in acc.Tags()["scalars"])
+
+
+def test_greedy_eval_runs_a_copy_of_the_network_on_its_own_thread():
+    from laneshift.envspec import env_spec
+
+    env_cfg = EnvConfig(scenario="lka", max_steps=20)
+    schema = env_spec(env_cfg).schema
+    net = build_q_network(schema.obs_shape, schema.n_actions, (8,))
+    ev = GreedyEval(env_cfg, every=100, episodes=2, seed=0, obs_shape=schema.obs_shape,
+                    n_actions=schema.n_actions, hidden=(8,), dueling=False)
+    assert not ev.due(99) and ev.due(100)
+    ev.start(net, 250, updates=7, version=3)
+    assert ev.next_at == 300 and not ev.due(299)
+    ev._thread.join(30)
+    result = ev.take()
+    assert result is not None and ev.take() is None and ev.failed is None
+    assert result["env_steps"] == 250 and result["updates"] == 7 and result["version"] == 3
+    assert result["episodes"] == 2 and 0.0 <= result["survival_rate"] <= 1.0
+    assert "achievement_rate" not in result  # LKA: no target lane
+    assert result["length_mean"] <= 20
+    ev.close()
+
+
+def test_a_running_eval_is_cancelled_at_close():
+    from laneshift.envspec import env_spec
+
+    env_cfg = EnvConfig(scenario="lka")
+    schema = env_spec(env_cfg).schema
+    ev = GreedyEval(env_cfg, every=1, episodes=10_000, seed=0, obs_shape=schema.obs_shape,
+                    n_actions=schema.n_actions, hidden=(8,), dueling=False)
+    ev.start(build_q_network(schema.obs_shape, schema.n_actions, (8,)), 1)
+    began = time.monotonic()
+    ev.close(timeout=0)
+    assert not ev.running and time.monotonic() - began < 5
+    assert ev.take() is None and ev.failed is None
+
+
+def test_eval_during_training_on_the_lka_plant(tmp_path):
+    from laneshift.deploy.inprocess import train_inprocess
+
+    fast = {"env.scenario": "lka", "env.max_steps": 50, "actor.send_every": 50, "learner.hidden": "32,32",
+            "learner.batch_size": 32, "learner.publish_every": 5, "replay.min_size": 100,
+            "replay.samples_per_insert": 4, "replay.spi_tolerance": 512, "train.env_steps": 2000,
+            "train.eval_every": 400, "train.periodic_eval_episodes": 2, "train.run_dir": str(tmp_path)}
+    began = time.monotonic()
+    train_inprocess(load_run_config(overrides=fast))
+    assert time.monotonic() - began < 120
+    records = [json.loads(line) for line in (tmp_path / "metrics.jsonl").read_text().splitlines()]
+    evals = [r for r in records if r["kind"] == "eval"]
+    assert evals, "no greedy evaluation finished during training"
+    assert all(r["episodes"] == 2 and 0.0 <= r["survival_rate"] <= 1.0 for r in evals)
+    steps = [r["env_steps"] for r in evals]
+    assert steps == sorted(set(steps)) and steps[0] >= 400
+    acc = _scalars(tmp_path / "tb")
+    assert _steps(acc, "eval/survival_rate") == steps
+    assert {"eval/return_mean", "eval/length_mean"} <= set(acc.Tags()["scalars"])
+    for tag in acc.Tags()["scalars"]:
+        s = _steps(acc, tag)
+        assert s == sorted(s), tag
