@@ -32,7 +32,7 @@ def test_compare_runs_methods_and_seeds_and_writes_the_table(tmp_path):
     assert results["baselines"]["keep-lane"]["non-target"]["achievement"]["rate"] == 0.0
     table = (tmp_path / "exp" / "table.md").read_text()
     assert "| dqfd | non-target |" in table and "| scripted (baseline) | random |" in table
-    for name in ("curves_episodes.png", "curves_wallclock.png"):
+    for name in ("curves_env_steps.png", "curves_wallclock.png", "table2.png"):
         assert (tmp_path / "exp" / name).read_bytes()[:4] == b"\x89PNG"
     # dqfd really used the margin loss and retention with demos.
     cfg = (tmp_path / "exp" / "dqfd-s0" / "config.yaml").read_text()

@@ -389,6 +389,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     register_bench_run(bench_sub)
     register_bench_worker(bench_sub)
+    from laneshift.deploy.bench_all import register as register_bench_all
+
+    register_bench_all(bench_sub)
     from laneshift.deploy.chaos import register as register_chaos
 
     register_chaos(sub)

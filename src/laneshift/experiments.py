@@ -3,16 +3,24 @@
 Every method is trained with the same budget and seeds through the real local system (Ray
 workers, zenoh, replay-server and learner processes), then its final network is evaluated
 greedily from both initial-lane settings; the baseline drivers are evaluated on the same episode
-seeds. Rates are pooled over seeds (Wilson 95 % intervals over all evaluation episodes).
+seeds. A method's rate is the mean of its per-seed rates with a 95 % percentile bootstrap
+interval over seeds (``laneshift.studies_stats``); the rate pooled over all evaluation episodes
+with its Wilson interval is kept beside it, labelled pooled (it treats the episodes of different
+seeds as independent, so it understates the uncertainty).
 
     laneshift experiment compare --scenario straight --methods none,retention,rehearsal,dqfd \\
         --seeds 0,1,2 --env-steps 150000 --eval-episodes 200 --out runs/exp-table2
+    laneshift experiment replot --results docs/results/table2-v2
 
 Methods: ``none``, ``retention``, ``rehearsal`` (the paper), ``dqfd`` (beyond the paper: a
 demo-only pre-training phase, then retention, with DQfD's large-margin loss on demo rows and
 10-step returns), ``dqfd-bc`` (``dqfd`` plus a cross-entropy imitation loss on demo rows and a
-dueling head). Writes ``results.json``, ``table.md`` and
-``curves_episodes.png`` / ``curves_wallclock.png`` (moving-average return and episode length).
+dueling head). Writes ``results.json``, ``table.md``, ``table2.png`` (bars with across-seed
+intervals), ``episodes.json`` (every run's per-episode data, so the curves can be redrawn once the
+run dirs are gone) and ``curves_env_steps.png`` / ``curves_wallclock.png`` (moving-average return
+and episode length, mean over seeds with a 95 % bootstrap band; ``curves_episodes.png`` instead of
+the env-step figure for logs without env steps). ``replot`` redraws the table and figures of a
+study from its ``results.json`` and ``episodes.json`` (or the runs' ``metrics.jsonl``).
 """
 
 from __future__ import annotations
@@ -31,6 +39,7 @@ import numpy as np
 from .config import ConfigError, RunConfig, load_run_config
 from .evaluate import INITIAL_LANES, evaluate_lanes, load_greedy_policy, wilson_ci95
 from .progress import progress, write
+from .studies_stats import RESAMPLES, bootstrap_ci, curves_on_grid
 
 # DQfD (Hester et al. 2018): pre-training on demos (20,000 updates), demos kept in the buffer
 # (30 % of 300,000 items, i.e. about 300 scripted episodes), large-margin loss on demo rows,
@@ -140,10 +149,7 @@ def run_compare(args: argparse.Namespace) -> dict:
                 f"{lane} survival {e['survival_rate']:.0%} achievement {e['achievement_rate']:.0%}"
                 for lane, e in evals.items()))
             overall.update()
-        results["methods"][method] = {"runs": runs, **{
-            lane: {"survival": pooled([r["eval"][lane] for r in runs], "survival_rate"),
-                   "achievement": pooled([r["eval"][lane] for r in runs], "achievement_rate")}
-            for lane in INITIAL_LANES}}
+        results["methods"][method] = {"runs": runs, **_lane_stats(runs)}
     if args.baselines:
         from laneshift.actors.envs.demonstrator import KeepLaneDriver, ScriptedDriver
 
@@ -163,7 +169,11 @@ def run_compare(args: argparse.Namespace) -> dict:
     overall.close()
     (out_dir / "results.json").write_text(json.dumps(results, indent=2))
     (out_dir / "table.md").write_text(render_table(results))
-    plot_curves(results, out_dir)
+    plot_table2(results, out_dir)
+    episodes, _ = collect_episodes(results, out_dir)
+    if episodes:
+        write_episodes(episodes, out_dir)
+    plot_curves(results, out_dir, episodes=episodes)
     print(render_table(results))
     return results
 
@@ -190,18 +200,139 @@ def _seed_list(text: str) -> list[int]:
 
 
 def render_table(results: dict) -> str:
+    """Table 2 as markdown: per method and initial lane, the mean over seeds of the per-seed rates
+    with its 95 % bootstrap interval over seeds (the headline), then the rate pooled over all
+    evaluation episodes with its Wilson interval (which treats episodes of different seeds as
+    independent, so it is narrower than the data warrant). Baselines are one evaluation each:
+    their rate, and the Wilson interval over its episodes."""
     lines = [f"{results['scenario']}: {results['env_steps']:,} env steps per run, seeds {results['seeds']}, "
              f"{results['eval_max_steps']}-step greedy evaluation episodes "
-             f"({results['eval_episodes']} per seed and initial lane; rates pooled, Wilson 95 % CI)", "",
-             "| method | initial lane | survival | achievement |", "|---|---|---|---|"]
-    rows = [(m, r) for m, r in results["methods"].items()] + [(f"{b} (baseline)", r)
-                                                              for b, r in results["baselines"].items()]
-    for name, r in rows:
+             f"({results['eval_episodes']} per seed and initial lane). Headline: mean of the per-seed rates, "
+             f"95 % percentile bootstrap over seeds ({RESAMPLES:,} resamples; with two seeds it is the range of "
+             f"their two rates, with one seed there is none). "
+             f"Pooled: all episodes of all seeds as one sample, Wilson 95 % CI.", "",
+             "| method | initial lane | seeds | survival | achievement | survival (pooled) | achievement (pooled) |",
+             "|---|---|---|---|---|---|---|"]
+    pct = "{:.0%}".format
+
+    def cell(s: dict) -> str:
+        shown = s.get("ci95") and s.get("seeds", 2) > 1  # one seed: no across-seed interval
+        return pct(s["rate"]) + (f" [{pct(s['ci95'][0])}, {pct(s['ci95'][1])}]" if shown else "")
+
+    for name, lane, seeds, s, a, ps, pa in table2_rows(results):
+        lines.append(f"| {name} | {lane} | {seeds or '-'} | {cell(s)} | {cell(a)} | {cell(ps)} | {cell(pa)} |")
+    return "\n".join(lines) + "\n"
+
+
+def across_seeds(runs: list[dict], lane: str, key: str) -> dict:
+    """``key`` (``survival_rate`` ...) of ``lane`` over the runs: the mean of the per-seed rates and
+    its 95 % bootstrap interval over seeds (zero width with one seed: tables and plots then show
+    none)."""
+    per_seed = [float(r["eval"][lane][key]) for r in runs]
+    return {"rate": float(np.mean(per_seed)), "ci95": list(bootstrap_ci(per_seed)), "seeds": len(per_seed),
+            "per_seed": per_seed}
+
+
+def table2_rows(results: dict) -> list[tuple[str, str, int, dict, dict, dict, dict]]:
+    """(name, lane, seeds, survival, achievement, pooled survival, pooled achievement) for every
+    method (stats across its seeds, computed from the per-seed evaluations, so older results.json
+    files give the same) and baseline (one evaluation: seeds 0, its rate without an across-seed
+    interval)."""
+    rows = []
+    for method, r in results["methods"].items():
+        for lane in INITIAL_LANES:
+            evals = [run["eval"][lane] for run in r["runs"]]
+            rows.append((method, lane, len(r["runs"]),
+                         across_seeds(r["runs"], lane, "survival_rate"), across_seeds(r["runs"], lane, "achievement_rate"),
+                         pooled(evals, "survival_rate"), pooled(evals, "achievement_rate")))
+    for name, r in results["baselines"].items():
         for lane in INITIAL_LANES:
             s, a = r[lane]["survival"], r[lane]["achievement"]
-            lines.append(f"| {name} | {lane} | {s['rate']:.0%} [{s['ci95'][0]:.0%}, {s['ci95'][1]:.0%}] | "
-                         f"{a['rate']:.0%} [{a['ci95'][0]:.0%}, {a['ci95'][1]:.0%}] |")
-    return "\n".join(lines) + "\n"
+            rows.append((f"{name} (baseline)", lane, 0, {"rate": s["rate"], "ci95": None},
+                         {"rate": a["rate"], "ci95": None}, s, a))
+    return rows
+
+
+def _lane_stats(runs: list[dict]) -> dict:
+    """A method's per-lane numbers for results.json: the across-seed headline and the pooled rate."""
+    out = {}
+    for lane in INITIAL_LANES:
+        evals = [r["eval"][lane] for r in runs]
+        out[lane] = {}
+        for metric in ("survival", "achievement"):
+            p = pooled(evals, f"{metric}_rate")
+            out[lane][metric] = {**across_seeds(runs, lane, f"{metric}_rate"), "episodes": p["episodes"], "pooled": p}
+    return out
+
+
+# The paper's Table 2 (survival / achievement, %), as quoted in docs/RESULTS.md: drawn as marks on
+# the straight-scenario bar chart. Method names are this project's (none = "no prior knowledge").
+PAPER_TABLE2: dict[str, dict[str, tuple[float, float]]] = {
+    "none": {"random": (53, 50), "non-target": (33, 29)},
+    "retention": {"random": (49, 37), "non-target": (37, 10)},
+    "rehearsal": {"random": (67, 66), "non-target": (51, 48)},
+}
+PAPER_HUMAN: dict[str, tuple[float, float]] = {"random": (50.7, 50.3)}
+
+
+def plot_table2(results: dict, out_dir: Path) -> Path:
+    """``table2.png``: survival and achievement per method and initial lane, bars at the mean of the
+    per-seed rates with their 95 % bootstrap interval over seeds, each seed's rate as a dot;
+    baselines as horizontal lines; for the straight scenario the paper's numbers as black marks
+    (its human driver as a purple line)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    methods = list(results["methods"])
+    paper = results.get("scenario") == "straight"
+    fig, axes = plt.subplots(2, 2, figsize=(max(9.0, 3.0 + 2.6 * len(methods)), 7), sharey=True, squeeze=False)
+    baseline_styles = ["--", "-.", ":", (0, (5, 1, 1, 1, 1, 1))]
+    for col, lane in enumerate(INITIAL_LANES):
+        for row, metric in enumerate(("survival", "achievement")):
+            ax = axes[row][col]
+            for i, method in enumerate(methods):
+                st = across_seeds(results["methods"][method]["runs"], lane, f"{metric}_rate")
+                ax.bar(i, st["rate"], width=0.6, color=f"C{i}", alpha=0.8)
+                if st["seeds"] > 1:
+                    ax.errorbar(i, st["rate"], yerr=[[max(0.0, st["rate"] - st["ci95"][0])], [max(0.0, st["ci95"][1] - st["rate"])]],
+                                color="black", capsize=6, lw=1.5)
+                n = len(st["per_seed"])
+                ax.scatter(i + (np.linspace(-0.12, 0.12, n) if n > 1 else np.zeros(1)),
+                           st["per_seed"], s=14, color="black", alpha=0.6, zorder=3,
+                           label="one seed" if i == 0 else None)
+                if paper and method in PAPER_TABLE2:
+                    ax.plot([i - 0.38, i + 0.38], [PAPER_TABLE2[method][lane][row] / 100] * 2, color="black", lw=2.5,
+                            label="paper (Table 2)" if method == next(m for m in methods if m in PAPER_TABLE2) else None)
+            for j, (name, r) in enumerate(results["baselines"].items()):
+                ax.axhline(r[lane][metric]["rate"], color="grey", lw=1.2, ls=baseline_styles[j % len(baseline_styles)],
+                           label=f"{name} (baseline)")
+            if paper and lane in PAPER_HUMAN:
+                ax.axhline(PAPER_HUMAN[lane][row] / 100, color="tab:purple", lw=1.2, label="paper: human driver")
+            ax.set_xticks(range(len(methods)), methods)
+            ax.set_xlim(-0.6, len(methods) - 0.4)
+            ax.set_ylim(0, 1.05)
+            ax.set_title(f"{metric}, {lane} initial lane", fontsize=10)
+            ax.grid(axis="y", alpha=0.3)
+            if col == 0:
+                ax.set_ylabel(f"{metric} rate")
+    handles, labels = {}, []
+    for ax in axes.flat:
+        for h, l in zip(*ax.get_legend_handles_labels()):
+            handles.setdefault(l, h)
+    if handles:
+        fig.legend(list(handles.values()), list(handles), loc="lower center", ncol=min(len(handles), 6), fontsize=9)
+    seeds = sorted({len(r["runs"]) for r in results["methods"].values()})
+    what = ("one seed each (no interval)" if seeds == [1] else
+            f"mean over {'/'.join(map(str, seeds))} seeds, 95 % bootstrap interval over seeds")
+    fig.suptitle(f"{results['scenario']}: Table 2, {results['env_steps']:,} env steps per run; bars: {what}",
+                 fontsize=11)
+    fig.tight_layout(rect=(0, 0.07 if handles else 0, 1, 1))
+    out = out_dir / "table2.png"
+    fig.savefig(out, dpi=100)
+    plt.close(fig)
+    return out
 
 
 def _episode_curves(run_dir: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -224,36 +355,157 @@ def _moving_average(x: np.ndarray, window: int) -> np.ndarray:
     return np.convolve(x, np.ones(window) / window, mode="valid")
 
 
-def plot_curves(results: dict, out_dir: Path, window: int = 100) -> None:
-    """Like the paper's figs 4/5: moving-average return and episode length, vs episodes and time."""
+#: Per-episode data of a study's runs, kept next to its results.json (``write_episodes``) so that
+#: ``laneshift experiment replot`` can redraw the curves once the run dirs are gone.
+EPISODES_FILE = "episodes.json"
+
+
+def run_episodes(run_dir: str | Path) -> dict | None:
+    """A run's episodes from its ``metrics.jsonl``: ``time_s`` (since the run's first record, so a
+    pre-training phase counts), ``env_steps`` (None if a record lacks it: logs written before
+    episode records carried it), ``return`` and ``length``; None if the run has no metrics file."""
+    path = Path(run_dir) / "metrics.jsonl"
+    if not path.is_file():
+        return None
+    t0, t, steps, ret, length = None, [], [], [], []
+    with open(path) as f:
+        for line in f:
+            try:
+                rec = json.loads(line)
+            except ValueError:  # a line cut short by a killed run
+                continue
+            t0 = rec.get("time") if t0 is None else t0
+            if rec.get("kind") == "episode":
+                t.append(rec["time"] - t0)
+                steps.append(rec.get("env_steps"))
+                ret.append(rec["return"])
+                length.append(rec["length"])
+    return {"time_s": t, "env_steps": None if None in steps else steps, "return": ret, "length": length}
+
+
+def collect_episodes(results: dict, results_dir: Path) -> tuple[dict[str, dict], bool]:
+    """Every run's episodes, keyed ``<method>-s<seed>``, from the study's ``episodes.json``, else
+    the run's ``metrics.jsonl`` (at its recorded run dir, or a copy of the run dir next to
+    results.json). Runs found nowhere are left out. Also returns whether any came from a run dir
+    (then ``episodes.json`` is worth writing)."""
+    kept_path = results_dir / EPISODES_FILE
+    kept = json.loads(kept_path.read_text()).get("runs", {}) if kept_path.is_file() else {}
+    out, from_runs = {}, False
+    runs = [(m, run) for m, r in results["methods"].items() for run in r["runs"]]
+    for method, run in progress(runs, desc="replot: read runs", unit="run", disable=not runs):
+        key = f"{method}-s{run['seed']}"
+        if key in kept:
+            out[key] = kept[key]
+            continue
+        for place in (Path(run["run_dir"]), results_dir / Path(run["run_dir"]).name):
+            episodes = run_episodes(place)
+            if episodes is not None:
+                out[key], from_runs = episodes, True
+                break
+    return out, from_runs
+
+
+def write_episodes(episodes: dict[str, dict], out_dir: Path) -> Path:
+    """``episodes.json``: the runs' per-episode data, rounded (ms, 1e-3 return) to stay small."""
+    runs = {key: {"time_s": [round(x, 3) for x in e["time_s"]], "env_steps": e["env_steps"],
+                  "return": [round(x, 3) for x in e["return"]], "length": e["length"]}
+            for key, e in episodes.items()}
+    out = out_dir / EPISODES_FILE
+    out.write_text(json.dumps({"note": "per-episode training data of each run (<method>-s<seed>), from its "
+                                       "metrics.jsonl; time_s since the run's first record", "runs": runs}))
+    return out
+
+
+def plot_curves(results: dict, out_dir: Path, window: int = 100, episodes: dict[str, dict] | None = None) -> list[Path]:
+    """Like the paper's figs 4/5: moving-average return and episode length per method, the mean over
+    seeds with a 95 % bootstrap band over seeds (:func:`laneshift.studies_stats.curves_on_grid`:
+    each seed's moving average interpolated onto a common grid over the range every seed covers),
+    against env steps (``curves_env_steps.png``) and wall clock (``curves_wallclock.png``). Runs
+    whose episodes lack env steps (older logs) give ``curves_episodes.png`` instead of the env-step
+    figure. ``episodes``: per run (``<method>-s<seed>``), as :func:`collect_episodes` gives; by
+    default read from the runs' dirs. Returns the files written (none without episodes)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    for axis in ("episodes", "wallclock"):
+    if episodes is None:
+        episodes, _ = collect_episodes(results, out_dir)
+    per_method = {m: [episodes[k] for run in r["runs"] if (k := f"{m}-s{run['seed']}") in episodes and
+                      len(episodes[k]["return"]) > 0]
+                  for m, r in results["methods"].items()}
+    per_method = {m: runs for m, runs in per_method.items() if runs}
+    if not per_method:
+        return []
+    with_steps = all(e["env_steps"] is not None for runs in per_method.values() for e in runs)
+    axes = {"env_steps" if with_steps else "episodes": "env steps" if with_steps else "episodes",
+            "wallclock": "wall-clock seconds (from the run's start)"}
+    written = []
+    for axis, xlabel in axes.items():
         fig, (ax_r, ax_l) = plt.subplots(2, 1, figsize=(8, 7), sharex=True)
-        for method, r in results["methods"].items():
-            for i, run in enumerate(r["runs"]):
-                t, ret, length = _episode_curves(run["run_dir"])
-                if len(ret) == 0:
+        for method, runs in per_method.items():
+            color = f"C{list(results['methods']).index(method)}"
+            for ax, field in ((ax_r, "return"), (ax_l, "length")):
+                xs, ys = [], []
+                for e in runs:
+                    y = _moving_average(np.asarray(e[field], dtype=float), window)
+                    x = {"env_steps": e["env_steps"], "wallclock": e["time_s"],
+                         "episodes": np.arange(1, len(e["return"]) + 1)}[axis]
+                    xs.append(np.asarray(x, dtype=float)[-len(y):])  # each average at its window's last episode
+                    ys.append(y)
+                c = curves_on_grid(xs, ys)
+                if len(c["x"]) == 0:
                     continue
-                ma_r, ma_l = _moving_average(ret, window), _moving_average(length.astype(float), window)
-                x = np.arange(len(ret))[-len(ma_r):] if axis == "episodes" else t[-len(ma_r):]
-                kw = {"color": f"C{list(results['methods']).index(method)}", "alpha": 0.8, "lw": 1.2,
-                      "label": method if i == 0 else None}
-                ax_r.plot(x, ma_r, **kw)
-                ax_l.plot(x, ma_l, **kw)
-        ax_r.set_ylabel(f"return ({window}-episode mean)")
-        ax_l.set_ylabel("episode length (steps)")
-        ax_l.set_xlabel("episodes" if axis == "episodes" else "wall-clock seconds")
+                ax.plot(c["x"], c["mean"], color=color, lw=1.5,
+                        label=f"{method} ({len(runs)} seed{'s' if len(runs) > 1 else ''})" if ax is ax_r else None)
+                ax.fill_between(c["x"], c["lo"], c["hi"], color=color, alpha=0.2, lw=0)
+        ax_r.set_ylabel(f"return ({window}-episode moving average)")
+        ax_l.set_ylabel(f"episode length (steps, {window}-episode m. a.)")
+        ax_l.set_xlabel(xlabel)
         ax_r.legend()
         for ax in (ax_r, ax_l):
             ax.grid(alpha=0.3)
-        fig.suptitle(f"{results['scenario']}: learning curves ({len(results['seeds'])} seeds, one line per run)")
+        fig.suptitle(f"{results['scenario']}: learning curves, mean over seeds with 95 % bootstrap band over seeds\n"
+                     f"(each seed on a common grid over the range all its method's seeds cover)", fontsize=10)
         fig.tight_layout()
-        fig.savefig(out_dir / f"curves_{axis}.png", dpi=100)
+        path = out_dir / f"curves_{axis}.png"
+        fig.savefig(path, dpi=100)
         plt.close(fig)
+        written.append(path)
+    return written
+
+
+def run_replot(args: argparse.Namespace) -> int:
+    """Redraw a study's table and figures from what it kept, without training."""
+    results_dir = Path(args.results)
+    path = results_dir / "results.json"
+    if not path.is_file():
+        raise SystemExit(f"--results {args.results}: no results.json there (name a dir written by "
+                         f"`laneshift experiment compare`)")
+    try:
+        results = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise SystemExit(f"--results {args.results}: results.json is not readable JSON ({exc})") from None
+    if not (isinstance(results, dict) and isinstance(results.get("methods"), dict)
+            and isinstance(results.get("baselines"), dict) and "scenario" in results):
+        raise SystemExit(f"--results {args.results}: results.json is not from `laneshift experiment compare`")
+    out_dir = Path(args.out) if args.out else results_dir
+    out_dir.mkdir(parents=True, exist_ok=True)
+    written = []
+    if results["methods"]:
+        (out_dir / "table.md").write_text(render_table(results))
+        written += [out_dir / "table.md", plot_table2(results, out_dir)]
+    episodes, from_runs = collect_episodes(results, results_dir)
+    if episodes:
+        if from_runs:
+            written.append(write_episodes(episodes, out_dir))
+        written += plot_curves(results, out_dir, args.window, episodes)
+    else:
+        write(f"replot: no per-episode data for any run ({EPISODES_FILE} or the runs' metrics.jsonl): "
+              f"learning-curve figures left as they are")
+    for p in written:
+        write(f"replot: wrote {p}")
+    return 0
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -273,3 +525,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--config", help="base config file (YAML/TOML/JSON)")
     add_set_arg(p)
     p.set_defaults(func=lambda a: (run_compare(a), 0)[1])
+    p = subparsers.add_parser("replot", help="redraw a compare study's table and figures from its kept data, "
+                                             "without training")
+    p.add_argument("--results", required=True, metavar="DIR",
+                   help="a dir with the results.json of `laneshift experiment compare` (e.g. docs/results/table2-v2); "
+                        f"curves need its {EPISODES_FILE} or the runs' metrics.jsonl")
+    p.add_argument("--out", metavar="DIR", help="where table.md and the figures go (default: the --results dir)")
+    p.add_argument("--window", type=positive_int, default=100, help="episodes in the curves' moving average")
+    p.set_defaults(func=run_replot)

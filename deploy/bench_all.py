@@ -1,0 +1,128 @@
+"""``laneshift bench all``: every benchmark, one JSON object, each peer beside ours.
+
+What it is: runs ``laneshift bench env | replay | learner | worker | run`` one after another, each
+as its own process with ``--json`` (so one's memory or threads cannot colour the next), and the
+RLlib peer (``benchmarks/rllib_dqn.py`` in ``.venv-rllib``, built by ``make bench-rllib``) when
+that venv exists. Then it derives issue 13's figures from them: the learner against the bare
+loop (P5), env steps/s against the learner-bound (P1), peak memory (P8), start-up, and laneshift
+against RLlib. Nothing is measured twice and nothing is estimated: a figure whose benchmark did
+not run is ``null`` with the reason.
+May import: the contract and ``deploy``.
+
+    laneshift bench all --out docs/results/bench-all.json      # about 10 minutes here
+    laneshift bench all --quick                                  # shorter windows, about 4 minutes
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+#: The run the end-to-end figures come from: ``make train``'s shape without its demo phase.
+RUN_ARGS = "--workers 2 --scenario straight --env-steps {steps}"
+
+
+def _bench(name: str, args: list[str], timeout_s: float) -> dict:
+    """One ``laneshift bench NAME --json`` in its own process: its JSON, or why there is none."""
+    cmd = [sys.executable, "-m", "laneshift", "bench", name, *args, "--json"]
+    started = time.monotonic()
+    print(f"bench all: {name} ...", file=sys.stderr, flush=True)
+    try:
+        done = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s,
+                              env={**os.environ, "LANESHIFT_PROGRESS": "0"})
+    except subprocess.TimeoutExpired:
+        return {"error": f"timed out after {timeout_s:.0f} s", "command": " ".join(cmd[1:])}
+    out = done.stdout.strip()
+    try:  # Ray's raylet may print lines of its own before the JSON: take the last object
+        result = json.loads(out[out.index("{"):]) if out.startswith("{") else json.loads(out[out.rindex("\n{") + 1:])
+    except ValueError:
+        return {"error": f"rc {done.returncode}, no JSON", "stderr_tail": done.stderr[-600:], "command": " ".join(cmd[1:])}
+    print(f"bench all: {name} done in {time.monotonic() - started:.0f} s", file=sys.stderr, flush=True)
+    return {"command": "laneshift " + " ".join(cmd[3:]), **result}
+
+
+def _rllib(steps: int, timeout_s: float) -> dict:
+    root = Path(__file__).resolve().parents[1]
+    python, script = root / ".venv-rllib" / "bin" / "python", root / "benchmarks" / "rllib_dqn.py"
+    if not python.exists() or not script.exists():
+        return {"skipped": "no .venv-rllib here: `make bench-rllib` builds it (RLlib pins gymnasium 1.2.2)"}
+    print("bench all: rllib ...", file=sys.stderr, flush=True)
+    try:
+        done = subprocess.run([str(python), str(script), "--env-steps", str(steps)], capture_output=True, text=True,
+                              timeout=timeout_s, cwd=root)
+        out = done.stdout.strip()
+        return {"command": f".venv-rllib/bin/python benchmarks/rllib_dqn.py --env-steps {steps}",
+                **json.loads(out[out.rindex("\n{") + 1:] if "\n{" in out else out)}
+    except (subprocess.TimeoutExpired, ValueError) as exc:
+        return {"error": f"{type(exc).__name__}: {exc}"}
+
+
+def _get(d: dict, *path: str):
+    for key in path:
+        if not isinstance(d, dict) or key not in d:
+            return None
+        d = d[key]
+    return d
+
+
+def derive(r: dict) -> dict:
+    """Issue 13's figures from the benchmarks' own outputs (null where one did not run)."""
+    cases = r["learner"].get("cases")
+    learner = next((c for c in cases if c.get("name") == "mlp-b256"), {}) if isinstance(cases, list) else {}
+    bare = _get(learner, "bare", "updates_per_s")
+    run, peer = r["run"], r["peers"]["rllib"]
+    ratio = 32.0  # replay.samples_per_insert of the run, and the batch of 256: one update per 8 env steps
+    bound = bare * 256 / ratio if bare else None
+    ours = run.get("training_env_steps_per_s")
+    theirs = peer.get("env_steps_per_s") if isinstance(peer, dict) else None
+    return {
+        "p5_learner_over_bare": round(learner["learner_over_bare"], 2) if learner.get("learner_over_bare") else None,
+        "p5_learner_over_bare_cpu": round(learner["learner_over_bare_cpu"], 2) if learner.get("learner_over_bare_cpu") else None,
+        "p1_env_steps_per_s": ours, "p1_bound_env_steps_per_s": round(bound, 1) if bound else None,
+        "p1_fraction_of_bound": round(ours / bound, 2) if ours and bound else None,
+        "p8_peak_tree_rss_mb": run.get("peak_tree_rss_mb"), "p8_peak_tree_pss_mb": run.get("peak_tree_pss_mb"),
+        "startup_first_stored_s": run.get("first_stored_s"),
+        "vs_rllib_env_steps": round(ours / theirs, 1) if ours and theirs else None,
+        "vs_rllib_rss": round(run["peak_tree_rss_mb"] / peer["peak_tree_rss_mb"], 2)
+        if run.get("peak_tree_rss_mb") and isinstance(peer, dict) and peer.get("peak_tree_rss_mb") else None,
+    }
+
+
+def bench_all(quick: bool) -> dict:
+    seconds, steps = ("1", 10_000) if quick else ("3", 20_000)
+    rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                         cwd=Path(__file__).resolve().parents[1]).stdout.strip()
+    result: dict = {"revision": rev or None, "time": time.strftime("%Y-%m-%dT%H:%M:%S"),
+                    "machine": {"cpus": os.cpu_count(), "processor": platform.processor() or platform.machine(),
+                                "python": platform.python_version()}}
+    result["env"] = _bench("env", ["--steps", "600" if quick else "2000"], 600)
+    result["replay"] = _bench("replay", ["--duration", seconds, "--actors", "2,8"] if quick else [], 900)
+    result["learner"] = _bench("learner", ["--seconds", seconds, "--rounds", "2", "--cases", "mlp-b256,cnn-b32"], 900)
+    result["worker"] = _bench("worker", ["--steps", "4000" if quick else "8000"], 600)
+    result["run"] = _bench("run", ["--train-args", RUN_ARGS.format(steps=steps)], 900)
+    result["peers"] = {"rllib": _rllib(steps // 2, 1800)}
+    result["targets"] = derive(result)
+    return result
+
+
+def bench_all_main(args: argparse.Namespace) -> int:
+    result = bench_all(args.quick)
+    text = json.dumps(result, indent=2)
+    if args.out:
+        Path(args.out).write_text(text + "\n")
+    print(text)
+    return 0 if not any(isinstance(v, dict) and "error" in v for v in result.values()) else 1
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("all", help="every benchmark and the RLlib peer, as one JSON object with issue 13's figures",
+                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p.add_argument("--quick", action="store_true", help="shorter windows and runs (about 4 minutes instead of 10)")
+    p.add_argument("--out", help="also write the JSON to this file")
+    p.set_defaults(func=bench_all_main)
