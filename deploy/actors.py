@@ -198,6 +198,12 @@ class LearnerActor(_Service):
         self.session = transport.open_session(cfg.transport, max_message_bytes=cfg.max_message_bytes)
         self.learner = builder.learner(builder.learner_links(self.session, self.stop_event), self.stop_event)
 
+    def info(self) -> dict[str, Any]:
+        server = self.learner.prometheus
+        host = self.learner.lcfg.metrics_host
+        shown = self.where["node_ip"] if host in ("0.0.0.0", "::") else host
+        return {**self.where, "metrics_url": f"http://{shown}:{server.port}/metrics" if server else None}
+
     def run(self) -> dict:
         self.learner.run()  # returns on stop(), a stop message, or the stop criterion
         return {**self.learner.last_status, "restored_from": self.learner.restored_from,

@@ -413,6 +413,8 @@ class Run:
             self._say(f"train: replay inspection API {http}/stats on node {self.where['replay-server']['node_ip']} "
                       f"(or: laneshift replay inspect --router {endpoint} --run-id {cfg.transport.run_id})")
         learner = self.where["learner"]
+        if learner.get("metrics_url"):
+            self._say(f"train: learner metrics (Prometheus) {learner['metrics_url']}")
         self._say(f"train: router on {self.where['router']['node_ip']}, replay server on "
                   f"{self.where['replay-server']['node_ip']}, learner on {learner['node_ip']}")
 
@@ -690,8 +692,11 @@ def train(cfg: RunConfig, *, address: str | None = None, out: TextIO = sys.stdou
     started = time.monotonic()
     run_dir = Path(cfg.train.run_dir).resolve()
     cfg = cfg.replace(train=dataclasses.replace(cfg.train, run_dir=str(run_dir)),
-                      # Local runs serve the HTTP inspection API on a free loopback port unless told otherwise.
-                      replay=cfg.replay if cfg.replay.http_port != -1 else dataclasses.replace(cfg.replay, http_port=0))
+                      # Runs serve the HTTP inspection API on a free loopback port unless told otherwise,
+                      # and the learner's Prometheus /metrics too.
+                      replay=cfg.replay if cfg.replay.http_port != -1 else dataclasses.replace(cfg.replay, http_port=0),
+                      learner=cfg.learner if cfg.learner.metrics_port != -1
+                      else dataclasses.replace(cfg.learner, metrics_port=0))
     lock = RunDirLock(run_dir)
     ray_conn = RayConnection(address)
     run: Run | None = None

@@ -85,6 +85,11 @@ class Learner:
         self.checkpoint_failures = 0  # writes that failed (full disk, read-only dir): counted, retried later
         self._last_state_save = time.monotonic()
         self.restored_from: dict | None = self._restore()
+        self.prometheus = None  # learner.metrics_port >= 0: /metrics from the status of each log interval
+        if self.lcfg.metrics_port >= 0:
+            from .prometheus import LearnerMetricsServer
+
+            self.prometheus = LearnerMetricsServer(self.lcfg.metrics_host, self.lcfg.metrics_port)
 
     # ------------------------------------------------------------------ restart
 
@@ -199,6 +204,8 @@ class Learner:
         self.links.publish_stats(wire.encode_json({**self._status(), "done": True}))
         self.metrics.hparams(self.cfg.to_dict(), self._final_metrics(), self.env_steps)
         self.metrics.close()
+        if self.prometheus is not None:
+            self.prometheus.close()
         print(f"learner: stopped after {self.agent.updates} updates, version {self.version}", flush=True)
 
     def _should_stop(self) -> bool:
@@ -377,6 +384,8 @@ class Learner:
             self.replay_stats = stats
         status = self._status()
         self.last_status = status  # what the launcher's progress line reads (deploy.actors.LearnerActor.status)
+        if self.prometheus is not None:
+            self.prometheus.update({**status, "env_steps": self._note_env_steps()})
         self.links.publish_stats(wire.encode_json(status))
         flat = {k: v for k, v in status.items() if isinstance(v, (int, float)) and v is not None}
         flat.update({f"version_lag_{a}": lag for a, lag in status["version_lag"].items()})

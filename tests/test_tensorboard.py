@@ -270,3 +270,26 @@ def test_eval_during_training_on_the_lka_plant(tmp_path):
     for tag in acc.Tags()["scalars"]:
         s = _steps(acc, tag)
         assert s == sorted(s), tag
+
+
+def test_learner_prometheus_endpoint_serves_its_status():
+    """learner.metrics_port: /metrics in the Prometheus text format, counters as _total, the
+    status of the newest log interval, process metrics; closed with the learner's finish."""
+    import urllib.request
+
+    from laneshift.learner.prometheus import LearnerMetricsServer
+
+    server = LearnerMetricsServer("127.0.0.1", 0)
+    try:
+        server.update({"updates": 12, "env_steps": 3400, "episodes": 7, "loss": 0.25, "q_mean": -1.5,
+                       "version": 3, "phase": 0, "version_lag": {"w0": 1, "w1": 0}, "return_mean": None})
+        text = urllib.request.urlopen(f"http://127.0.0.1:{server.port}/metrics", timeout=5).read().decode()
+    finally:
+        server.close()
+    lines = {line.split(" ")[0]: line.split(" ")[1] for line in text.splitlines() if line and not line.startswith("#")}
+    assert float(lines["laneshift_learner_updates_total"]) == 12
+    assert float(lines["laneshift_learner_env_steps_total"]) == 3400
+    assert float(lines["laneshift_learner_loss"]) == 0.25
+    assert float(lines['laneshift_learner_version_lag{worker="w0"}']) == 1
+    assert "laneshift_learner_episode_return_mean" not in lines  # None: not reported, not 0
+    assert "laneshift_learner_updates_total counter" in text and "process_cpu_seconds_total" in lines

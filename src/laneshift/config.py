@@ -231,6 +231,9 @@ class LearnerConfig:
     keep_checkpoints: bool = False
     prefetch: int = 4  # batches per sample request (one round trip, several updates)
     torch_threads: int = 1
+    # The learner's Prometheus /metrics: -1 off, 0 a free port (local runs turn it on), else that port.
+    metrics_port: int = -1
+    metrics_host: str = "127.0.0.1"  # bind elsewhere only on purpose: no authentication
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -254,6 +257,8 @@ class LearnerConfig:
         _check(self.seed >= 0, "learner.seed", "must be >= 0", self.seed)
         _check(self.checkpoint_every_s >= 0, "learner.checkpoint_every_s", "must be >= 0", self.checkpoint_every_s)
         _check(self.device in ("auto", "cpu", "cuda"), "learner.device", "must be auto, cpu or cuda", self.device)
+        _check(-1 <= self.metrics_port <= 65535, "learner.metrics_port", "must be -1 (off), 0 (any free port) or a port",
+               self.metrics_port)
 
 
 @dataclass(frozen=True)
