@@ -28,6 +28,14 @@ from pathlib import Path
 RUN_ARGS = "--workers 2 --scenario straight --env-steps {steps}"
 
 
+def _last_json(text: str) -> dict:
+    """The last top-level JSON object of a command's stdout (Ray's raylet may print lines of its
+    own before it; the object's nested lines are indented, so its first line starts with "{")."""
+    text = text.strip()
+    start = text.rfind("\n{")
+    return json.loads(text[start + 1:] if start >= 0 else text)
+
+
 def _bench(name: str, args: list[str], timeout_s: float) -> dict:
     """One ``laneshift bench NAME --json`` in its own process: its JSON, or why there is none."""
     cmd = [sys.executable, "-m", "laneshift", "bench", name, *args, "--json"]
@@ -38,9 +46,8 @@ def _bench(name: str, args: list[str], timeout_s: float) -> dict:
                               env={**os.environ, "LANESHIFT_PROGRESS": "0"})
     except subprocess.TimeoutExpired:
         return {"error": f"timed out after {timeout_s:.0f} s", "command": " ".join(cmd[1:])}
-    out = done.stdout.strip()
-    try:  # Ray's raylet may print lines of its own before the JSON: take the last object
-        result = json.loads(out[out.index("{"):]) if out.startswith("{") else json.loads(out[out.rindex("\n{") + 1:])
+    try:
+        result = _last_json(done.stdout)
     except ValueError:
         return {"error": f"rc {done.returncode}, no JSON", "stderr_tail": done.stderr[-600:], "command": " ".join(cmd[1:])}
     print(f"bench all: {name} done in {time.monotonic() - started:.0f} s", file=sys.stderr, flush=True)
@@ -56,9 +63,8 @@ def _rllib(steps: int, timeout_s: float) -> dict:
     try:
         done = subprocess.run([str(python), str(script), "--env-steps", str(steps)], capture_output=True, text=True,
                               timeout=timeout_s, cwd=root)
-        out = done.stdout.strip()
         return {"command": f".venv-rllib/bin/python benchmarks/rllib_dqn.py --env-steps {steps}",
-                **json.loads(out[out.rindex("\n{") + 1:] if "\n{" in out else out)}
+                **_last_json(done.stdout)}
     except (subprocess.TimeoutExpired, ValueError) as exc:
         return {"error": f"{type(exc).__name__}: {exc}"}
 

@@ -57,6 +57,31 @@ def logged_env_steps(run_dir: Path) -> tuple[int, int]:
     return 0, 0
 
 
+def _wait_until(condition: Callable[[], bool], deadline: float, halt: threading.Event, period_s: float = 0.05) -> bool:
+    """Poll ``condition`` until it holds (True), or the deadline passes or ``halt`` is set (False)."""
+    while time.monotonic() < deadline and not halt.is_set():
+        if condition():
+            return True
+        time.sleep(period_s)
+    return False
+
+
+def _recovery_s(run_dir: Path, before: tuple[int, int], since: float, deadline: float,
+                halt: threading.Event) -> float | None:
+    """Seconds from ``since`` until env steps and learner updates are both past ``before``: a
+    learner that died shows recovery only once it updates again (actors may go on meanwhile)."""
+
+    def moved() -> bool:
+        steps, updates = logged_env_steps(run_dir)
+        return steps > before[0] and updates > before[1]
+
+    return round(time.monotonic() - since, 1) if _wait_until(moved, deadline, halt, 0.1) else None
+
+
+def _reached(run_dir: Path, steps: int) -> Callable[[], bool]:
+    return lambda: logged_env_steps(run_dir)[0] >= steps
+
+
 @dataclass(eq=False)  # a Thread must stay hashable
 class FaultInjector(threading.Thread):
     """Sends ``sig`` to ``component``'s process once the run has made ``at_steps`` env steps and
@@ -79,29 +104,18 @@ class FaultInjector(threading.Thread):
     def run(self) -> None:
         deadline = time.monotonic() + self.timeout_s
         pid_file = self.run_dir / "logs" / f"{self.component}.pid"
-        while time.monotonic() < deadline and not self._halt.is_set():
-            if pid_file.exists() and logged_env_steps(self.run_dir)[0] >= self.at_steps and self.ready():
-                before = logged_env_steps(self.run_dir)
-                pid = int(pid_file.read_text())
-                os.kill(pid, self.sig)
-                self.killed_pid, self.killed_at = pid, time.monotonic()
-                self._measure_recovery(before, deadline)
-                return
-            time.sleep(0.05)
+        reached = _reached(self.run_dir, self.at_steps)
+        if not _wait_until(lambda: pid_file.exists() and reached() and self.ready(), deadline, self._halt):
+            return
+        before = logged_env_steps(self.run_dir)
+        pid = int(pid_file.read_text())
+        os.kill(pid, self.sig)
+        self.killed_pid, self.killed_at = pid, time.monotonic()
+        self.recovery_s = _recovery_s(self.run_dir, before, self.killed_at, deadline, self._halt)
 
     @property
     def struck(self) -> bool:
         return self.killed_pid is not None
-
-    def _measure_recovery(self, before: tuple[int, int], deadline: float) -> None:
-        # Progress after the fault: both counters past where they stood when it struck, so a
-        # learner that died shows recovery only once it updates again (actors may go on meanwhile).
-        while time.monotonic() < deadline and not self._halt.is_set():
-            steps, updates = logged_env_steps(self.run_dir)
-            if steps > before[0] and updates > before[1]:
-                self.recovery_s = round(time.monotonic() - self.killed_at, 1)
-                return
-            time.sleep(0.1)
 
     def stop(self) -> None:
         self._halt.set()
@@ -287,11 +301,7 @@ class ReadOnlyRunDir(threading.Thread):
 
     def run(self) -> None:
         deadline = time.monotonic() + self.timeout_s
-        while time.monotonic() < deadline and not self._halt.is_set():
-            if logged_env_steps(self.run_dir)[0] >= self.at_steps:
-                break
-            time.sleep(0.05)
-        else:
+        if not _wait_until(_reached(self.run_dir, self.at_steps), deadline, self._halt):
             return
         where = str(self.run_dir)
         bound = subprocess.run(["mount", "--bind", where, where], capture_output=True, text=True)
@@ -302,19 +312,11 @@ class ReadOnlyRunDir(threading.Thread):
             ro = subprocess.run(["mount", "-o", "remount,bind,ro", where], capture_output=True, text=True)
             self.struck = ro.returncode == 0
             self.error = ro.stderr.strip()
-            until = time.monotonic() + self.seconds
-            while time.monotonic() < until and not self._halt.is_set() \
-                    and logged_env_steps(self.run_dir)[0] < self.until_steps:
-                time.sleep(0.05)
+            _wait_until(_reached(self.run_dir, self.until_steps), time.monotonic() + self.seconds, self._halt)
         finally:
             subprocess.run(["umount", "-l", where], check=False)
         before, back = logged_env_steps(self.run_dir), time.monotonic()
-        while time.monotonic() < deadline and not self._halt.is_set():
-            steps, updates = logged_env_steps(self.run_dir)
-            if steps > before[0] and updates > before[1]:
-                self.recovery_s = round(time.monotonic() - back, 1)
-                return
-            time.sleep(0.1)
+        self.recovery_s = _recovery_s(self.run_dir, before, back, deadline, self._halt)
 
     def stop(self) -> None:
         self._halt.set()
@@ -347,11 +349,7 @@ class StatsFlood(threading.Thread):
         from laneshift.envspec import env_spec
 
         deadline = time.monotonic() + self.timeout_s
-        while time.monotonic() < deadline and not self._halt.is_set():
-            if logged_env_steps(self.run_dir)[0] >= self.at_steps:
-                break
-            time.sleep(0.05)
-        else:
+        if not _wait_until(_reached(self.run_dir, self.at_steps), deadline, self._halt):
             return
         cfg = load_run_config(self.run_dir / "config.yaml")  # as the launcher resolved it: the router's endpoint
         schema = env_spec(cfg.env).schema
@@ -373,12 +371,7 @@ class StatsFlood(threading.Thread):
                     self.stats_answered += 1
                     self.largest_reply = max(self.largest_reply, len(reply))
                 time.sleep(0.2)
-        while time.monotonic() < deadline and not self._halt.is_set():
-            steps, updates = logged_env_steps(self.run_dir)
-            if steps > before[0] and updates > before[1]:
-                self.recovery_s = round(time.monotonic() - began, 1)
-                return
-            time.sleep(0.1)
+        self.recovery_s = _recovery_s(self.run_dir, before, began, deadline, self._halt)
 
     def report(self) -> dict:
         return {"flood_actors": self.actors, "stats_answered": f"{self.stats_answered}/{self.stats_asked}",
