@@ -14,7 +14,8 @@ docs/rllib-peer.md says what is matched and what is not.
 
 What it may import: the standard library, ray/RLlib, torch, gymnasium, and of laneshift ONLY its
 env code (``laneshift.actors.envs``: gymnasium + highway-env + pygame-ce, no zenoh, no replay
-server, no learner). RLlib 2.60 pins gymnasium 1.2.2 while laneshift pins 1.4.0, so it runs in
+server, no learner) and ``laneshift.deploy.bench_run``'s process-tree sampler (no zenoh or torch at
+import), so both systems' memory is measured by the same code. RLlib 2.60 pins gymnasium 1.2.2 while laneshift pins 1.4.0, so it runs in
 its own venv, ``.venv-rllib`` (laneshift installed there with ``--no-deps -e .``).
 
 How to run it (``make bench-rllib`` creates .venv-rllib if missing and runs this):
@@ -33,9 +34,7 @@ import os
 import shutil
 import sys
 import tempfile
-import threading
 import time
-from pathlib import Path
 
 SCENARIO = "straight"
 ENV_NAME = "laneshift-straight-vector"
@@ -54,97 +53,14 @@ def make_laneshift_env(env_config: dict | None = None):
 
 # ---------------------------------------------------------------- memory of the process tree
 
-def _descendants(pid: int) -> set[int]:
-    """Every process below ``pid`` now, read from /proc (children, their children, ...)."""
-    children: dict[int, list[int]] = {}
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
-            except (OSError, IndexError, ValueError):
-                continue
-            children.setdefault(ppid, []).append(int(entry.name))
-    found, todo = set(), [pid]
-    while todo:
-        for child in children.get(todo.pop(), []):
-            if child not in found:
-                found.add(child)
-                todo.append(child)
-    return found
+def _tree_sampler(root: int):
+    """``laneshift bench run``'s sampler, its processes named for an RLlib run."""
+    import functools
 
+    from laneshift.deploy.bench_run import TreeSampler, process_label
 
-def _read_kb(path: str, field: str) -> int:
-    try:
-        with open(path) as f:
-            for line in f:
-                if line.startswith(field):
-                    return int(line.split()[1])
-    except (OSError, ValueError, IndexError):
-        pass
-    return 0
-
-
-def _label(pid: int, root: int) -> str:
-    if pid == root:
-        return "driver (algorithm + local learner)"
-    try:
-        cmd = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
-    except OSError:
-        return "?"
-    if "SingleAgentEnvRunner" in cmd:
-        return "env-runner"
-    if cmd.startswith("ray::"):
-        return "ray-worker (" + cmd.split()[0][5:] + ")"
-    for part, label in (("gcs_server", "ray gcs"), ("raylet", "ray raylet"), ("dashboard/agent.py", "ray dashboard agent"),
-                        ("runtime_env/agent", "ray runtime-env agent"), ("log_monitor.py", "ray log monitor"),
-                        ("monitor.py", "ray monitor"), ("dashboard.py", "ray dashboard"),
-                        ("default_worker.py", "ray-worker (idle)")):
-        if part in cmd:
-            return label
-    return Path(cmd.split()[0]).name if cmd.strip() else "?"
-
-
-class TreeSampler(threading.Thread):
-    """Sums RSS (/proc/PID/status VmRSS) and PSS (/proc/PID/smaps_rollup Pss) over ``root`` and all
-    its descendants every ``period_s``; keeps the peak sums and each process's own peak."""
-
-    def __init__(self, root: int, period_s: float = 0.5):
-        super().__init__(daemon=True, name="tree-sampler")
-        self.root, self.period_s = root, period_s
-        self.peak_rss_kb = self.peak_pss_kb = self.max_processes = 0
-        self.per_process: dict[int, dict] = {}
-        self._halt = threading.Event()
-
-    def sample(self) -> None:
-        rss = pss = n = 0
-        for pid in {self.root} | _descendants(self.root):
-            r = _read_kb(f"/proc/{pid}/status", "VmRSS:")
-            if not r:
-                continue
-            p = _read_kb(f"/proc/{pid}/smaps_rollup", "Pss:")
-            rss, pss, n = rss + r, pss + p, n + 1
-            seen = self.per_process.setdefault(pid, {"label": "?", "rss_kb": 0, "pss_kb": 0})
-            seen["label"] = _label(pid, self.root)  # a Ray worker is default_worker.py until it becomes an actor
-            seen["rss_kb"], seen["pss_kb"] = max(seen["rss_kb"], r), max(seen["pss_kb"], p)
-        self.peak_rss_kb, self.peak_pss_kb = max(self.peak_rss_kb, rss), max(self.peak_pss_kb, pss)
-        self.max_processes = max(self.max_processes, n)
-
-    def run(self) -> None:
-        while not self._halt.wait(self.period_s):
-            self.sample()
-
-    def stop(self) -> None:
-        self._halt.set()
-        self.join(5)
-
-    def by_label(self) -> dict[str, dict]:
-        out: dict[str, dict] = {}
-        for p in self.per_process.values():
-            row = out.setdefault(p["label"], {"count": 0, "rss_mb": 0.0, "pss_mb": 0.0})
-            row["count"] += 1
-            row["rss_mb"] = max(row["rss_mb"], round(p["rss_kb"] / 1024, 1))
-            row["pss_mb"] = max(row["pss_mb"], round(p["pss_kb"] / 1024, 1))
-        return dict(sorted(out.items(), key=lambda kv: -kv[1]["pss_mb"]))
+    return TreeSampler(root, label=functools.partial(process_label, root_label="driver (algorithm + local learner)",
+                                                     actors=(("SingleAgentEnvRunner", "env-runner"),)))
 
 
 # ---------------------------------------------------------------- the RLlib config
@@ -266,7 +182,7 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(stream=sys.stderr, level=logging.WARNING)
     os.environ.setdefault("RAY_DEDUP_LOGS", "0")
     t0 = time.monotonic()
-    sampler = TreeSampler(os.getpid())
+    sampler = _tree_sampler(os.getpid())
     sampler.start()
 
     # A private, loopback-only cluster, started as laneshift's launcher starts its own (deploy/launch.py);

@@ -30,6 +30,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+from typing import Callable
 
 from .chaos import descendants
 
@@ -49,23 +50,31 @@ def _read_kb(path: str, field: str) -> int:
     return 0
 
 
-def process_label(pid: int, launcher: int) -> str:
-    """What a process of the run is, from its command line (Ray names actor processes ray::Class)."""
-    if pid == launcher:
-        return "launcher"
+#: Processes named by a part of their command line (Ray titles an actor's process ray::Class).
+LANESHIFT_ACTORS = (("ray::RouterActor", "router"), ("ray::ReplayServerActor", "replay-server"),
+                    ("ray::LearnerActor", "learner"), ("ray::EnvWorkerActor", "env-worker"))
+_RAY_PROCESSES = (("gcs_server", "ray gcs"), ("raylet", "ray raylet"), ("dashboard/agent.py", "ray dashboard agent"),
+                  ("runtime_env/agent", "ray runtime-env agent"), ("log_monitor.py", "ray log monitor"),
+                  ("monitor.py", "ray monitor"), ("dashboard.py", "ray dashboard"),
+                  ("default_worker.py", "ray-worker (idle)"))
+
+
+def process_label(pid: int, root: int, root_label: str = "launcher",
+                  actors: tuple[tuple[str, str], ...] = LANESHIFT_ACTORS) -> str:
+    """What a process of the tree is, from its command line: ``root_label`` for the root, an actor
+    by ``actors`` (part of the command line, label), else Ray's own processes by their files."""
+    if pid == root:
+        return root_label
     try:
         cmd = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
     except OSError:
         return "?"
-    for actor, label in (("RouterActor", "router"), ("ReplayServerActor", "replay-server"),
-                         ("LearnerActor", "learner"), ("EnvWorkerActor", "env-worker")):
-        if f"ray::{actor}" in cmd:
+    for part, label in actors:
+        if part in cmd:
             return label
     if cmd.startswith("ray::"):
         return "ray-worker (" + cmd.split()[0][5:] + ")"
-    for part, label in (("gcs_server", "ray gcs"), ("raylet", "ray raylet"), ("dashboard/agent.py", "ray dashboard agent"),
-                        ("runtime_env/agent", "ray runtime-env agent"), ("log_monitor.py", "ray log monitor"),
-                        ("monitor.py", "ray monitor"), ("dashboard.py", "ray dashboard"), ("default_worker.py", "ray-worker (idle)")):
+    for part, label in _RAY_PROCESSES:
         if part in cmd:
             return label
     if "os.getppid()==p" in cmd:
@@ -74,30 +83,34 @@ def process_label(pid: int, launcher: int) -> str:
 
 
 class TreeSampler(threading.Thread):
-    """Samples the RSS and PSS of ``root`` and everything below it until stopped."""
+    """Samples the RSS and PSS of ``root`` and everything below it until stopped; ``label(pid,
+    root)`` names each process (``process_label`` by default)."""
 
-    def __init__(self, root: int, period_s: float = 0.5):
+    def __init__(self, root: int, period_s: float = 0.5, label: Callable[[int, int], str] = process_label):
         super().__init__(daemon=True, name="tree-sampler")
-        self.root, self.period_s = root, period_s
-        self.peak_rss_kb = self.peak_pss_kb = 0
+        self.root, self.period_s, self.label = root, period_s, label
+        self.peak_rss_kb = self.peak_pss_kb = self.max_processes = 0
         self.per_process: dict[int, dict] = {}  # pid -> {"label", "rss_kb", "pss_kb"} (peaks)
         self._halt = threading.Event()
 
+    def sample(self) -> None:
+        rss = pss = n = 0
+        for pid in {self.root} | descendants(self.root):
+            r = _read_kb(f"/proc/{pid}/status", "VmRSS:")
+            if not r:
+                continue
+            p = _read_kb(f"/proc/{pid}/smaps_rollup", "Pss:")
+            rss, pss, n = rss + r, pss + p, n + 1
+            seen = self.per_process.setdefault(pid, {"label": "?", "rss_kb": 0, "pss_kb": 0})
+            # Again each time: a Ray worker is "default_worker.py" until it becomes an actor.
+            seen["label"] = self.label(pid, self.root)
+            seen["rss_kb"], seen["pss_kb"] = max(seen["rss_kb"], r), max(seen["pss_kb"], p)
+        self.peak_rss_kb, self.peak_pss_kb = max(self.peak_rss_kb, rss), max(self.peak_pss_kb, pss)
+        self.max_processes = max(self.max_processes, n)
+
     def run(self) -> None:
         while not self._halt.wait(self.period_s):
-            pids = {self.root} | descendants(self.root)
-            rss = pss = 0
-            for pid in pids:
-                r = _read_kb(f"/proc/{pid}/status", "VmRSS:")
-                p = _read_kb(f"/proc/{pid}/smaps_rollup", "Pss:")
-                if not r:
-                    continue
-                rss, pss = rss + r, pss + p
-                seen = self.per_process.setdefault(pid, {"label": "?", "rss_kb": 0, "pss_kb": 0})
-                # Again each time: a Ray worker is "default_worker.py" until it becomes an actor.
-                seen["label"] = process_label(pid, self.root)
-                seen["rss_kb"], seen["pss_kb"] = max(seen["rss_kb"], r), max(seen["pss_kb"], p)
-            self.peak_rss_kb, self.peak_pss_kb = max(self.peak_rss_kb, rss), max(self.peak_pss_kb, pss)
+            self.sample()
 
     def stop(self) -> None:
         self._halt.set()
