@@ -177,6 +177,15 @@ class ReplayService:
     def stop(self) -> None:
         self.stop_event.set()
 
+    def join(self, timeout_s: float) -> list[str]:
+        """Wait (at most ``timeout_s`` in all) for the service threads to end; the names of those
+        still running. Call it after the sessions are closed: that is what wakes a thread blocked
+        in a channel's ``recv()``."""
+        deadline = time.monotonic() + timeout_s
+        for thread in self._threads:
+            thread.join(max(0.0, deadline - time.monotonic()))
+        return [t.name for t in self._threads if t.is_alive()]
+
 
 def build_core(cfg: RunConfig) -> ReplayCore:
     """The replay core for a run: schema from the env, demo shards validated against it."""
@@ -276,6 +285,12 @@ class ReplayServer:
             print(f"replay-server: final checkpoint of {final_ckpt['items']} items in {final_ckpt['seconds']} s",
                   flush=True)
         self.close()
+        # No thread of ours may still be inside a zenoh call when the interpreter finalizes (see
+        # cli._end_service_process); the sessions are closed, so their channels have woken them.
+        left = self.service.join(timeout_s=10.0)
+        if left:
+            print(f"replay-server: threads still running after the sessions closed: {', '.join(left)}",
+                  file=sys.stderr, flush=True)
         final = self.core.stats(all_actors=True)  # a file, not a reply: every actor
         final["demo_digest_start"], final["demo_digest_end"] = self.demo_digest, self.core.demo.digest()
         out = Path(self.cfg.train.run_dir) / "replay_stats.json"

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 from typing import Any, NoReturn
@@ -227,23 +228,42 @@ def _add_train(sub: argparse._SubParsersAction) -> None:
 # ---------------------------------------------------------------------------- services
 
 
+def _end_service_process(rc: int) -> NoReturn:
+    """End a service process (replay server, learner, router) once it has stopped cleanly: flush
+    the std streams and ``os._exit(rc)``, skipping interpreter finalization.
+
+    Why: zenoh-python is Rust (pyo3). A thread that returns from a zenoh call (a channel's
+    ``recv()``, a session's ``close()`` that timed out) while CPython 3.11 finalizes is ended with
+    ``pthread_exit``; its forced unwind is caught by pyo3's panic guard and glibc aborts the
+    process ("FATAL: exception not rethrown", SIGABRT) after the final checkpoint and stats were
+    written. CI saw it once on a replay server's SIGTERM. Every file the service writes is
+    written and closed before this point, so finalization has nothing left to do for us."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # a closed or broken pipe: nothing more to say anyway
+            pass
+    os._exit(rc)
+
+
 def _replay_server(args: argparse.Namespace) -> int:
     from laneshift.replay_server.service import run_replay_server
 
     cfg = _config_from(args, {"replay.http_port": args.http_port, "replay.http_host": args.http_host})
-    return run_replay_server(cfg, embedded_router=args.embedded_router, ready_file=args.ready_file)
+    return _end_service_process(run_replay_server(cfg, embedded_router=args.embedded_router,
+                                                  ready_file=args.ready_file))
 
 
 def _learner(args: argparse.Namespace) -> int:
     from laneshift.learner.loop import run_learner
 
-    return run_learner(_config_from(args))
+    return _end_service_process(run_learner(_config_from(args)))
 
 
 def _router(args: argparse.Namespace) -> int:
     from laneshift.deploy.router import run_router
 
-    return run_router(args.listen)
+    return _end_service_process(run_router(args.listen))
 
 
 def _add_services(sub: argparse._SubParsersAction) -> None:
