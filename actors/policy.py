@@ -71,14 +71,14 @@ class _TorchNet:
     """The torch network (image observations), behind the same two methods as ``NumpyMLP``."""
 
     def __init__(self, obs_shape: tuple[int, ...], n_actions: int, hidden: tuple[int, ...], dueling: bool,
-                 threads: int):
+                 threads: int, cnn: str = "nature"):
         import torch
 
         from laneshift.learner.networks import build_q_network
 
         torch.set_num_threads(threads)
         self.torch = torch
-        self.net = build_q_network(obs_shape, n_actions, hidden, dueling).eval()
+        self.net = build_q_network(obs_shape, n_actions, hidden, dueling, cnn).eval()
 
     def load(self, tensors: dict[str, np.ndarray]) -> None:
         from laneshift.learner.weights import load_into
@@ -92,7 +92,7 @@ class _TorchNet:
 
 class QPolicy:
     def __init__(self, obs_shape: tuple[int, ...], n_actions: int, hidden: tuple[int, ...], seed: int = 0,
-                 dueling: bool = False, torch_threads: int = 1):
+                 dueling: bool = False, torch_threads: int = 1, cnn: str = "nature"):
         if len(obs_shape) == 1:
             # One BLAS thread: OpenBLAS's thread pool made a 16-row forward pass 27x slower here
             # (3.9 ms vs 0.15 ms on 2 busy cores), and a worker has one core's share anyway.
@@ -101,7 +101,7 @@ class QPolicy:
             threadpool_limits(limits=torch_threads, user_api="blas")
             self.q = NumpyMLP(obs_shape[0], n_actions, tuple(hidden), dueling)
         else:
-            self.q = _TorchNet(tuple(obs_shape), n_actions, tuple(hidden), dueling, torch_threads)
+            self.q = _TorchNet(tuple(obs_shape), n_actions, tuple(hidden), dueling, torch_threads, cnn)
         self.n_actions = n_actions
         self.rng = np.random.default_rng(seed)
         self.version = -1

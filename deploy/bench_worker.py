@@ -59,7 +59,8 @@ def bench_worker(scenario: str, envs: int, steps: int, epsilon: float = 0.1) -> 
     builder = Builder(cfg)
     worker = builder.env_worker(0)
     spec = builder.spec.schema
-    net = build_q_network(spec.obs_shape, spec.n_actions, cfg.learner.hidden, cfg.learner.dueling)
+    net = build_q_network(spec.obs_shape, spec.n_actions, cfg.learner.hidden, cfg.learner.dueling,
+                          cfg.learner.cnn)
     links = CountingLinks(to_wire(net, 0, 0, 0))
     started, cpu = time.perf_counter(), time.process_time()
     summary = worker.run(links, steps)

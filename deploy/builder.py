@@ -105,7 +105,8 @@ class Builder:
         cfg = self.cfg
         return EnvWorker(self.workers[index], index, cfg.env, cfg.actor, cfg.learner.hidden,
                          sync=cfg.train.parallel == "sync", rehearsal=cfg.replay.pretrains,
-                         n_step=cfg.learner.n_step, gamma=cfg.learner.gamma, dueling=cfg.learner.dueling)
+                         n_step=cfg.learner.n_step, gamma=cfg.learner.gamma, dueling=cfg.learner.dueling,
+                         cnn=cfg.learner.cnn)
 
     def actor_links(self, session, name: str):
         from laneshift.actors.links import ZenohActorLinks

@@ -139,7 +139,7 @@ class DoubleDQN:
         torch.manual_seed(cfg.seed)
         self.cfg = cfg
         self.device = resolve_device(cfg.device)
-        self.online = build_q_network(obs_shape, n_actions, cfg.hidden, cfg.dueling).to(self.device)
+        self.online = build_q_network(obs_shape, n_actions, cfg.hidden, cfg.dueling, cfg.cnn).to(self.device)
         self.target = copy.deepcopy(self.online).requires_grad_(False)
         self._params = list(self.online.parameters())
         # The networks hold no BatchNorm, dropout or other batch- or mode-dependent layer (only

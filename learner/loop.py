@@ -74,7 +74,7 @@ class Learner:
         # The same episode seeds as the final summary's evaluation (deploy/launch.py: train.seed + 12345).
         self.evaluator = GreedyEval(cfg.env, t.eval_every, t.periodic_eval_episodes, t.seed + 12345,
                                     spec.schema.obs_shape, spec.schema.n_actions, cfg.learner.hidden,
-                                    cfg.learner.dueling) if t.eval_every else None
+                                    cfg.learner.dueling, cfg.learner.cnn) if t.eval_every else None
         self.last_eval: dict | None = None
         self.last_update: Mapping[str, float] = {}  # the last update's metrics (dqn.UpdateMetrics: read lazily)
         self.replay_stats: dict = {}
@@ -161,7 +161,7 @@ class Learner:
         meta = {"version": self.version, "updates": self.agent.updates, "phase": self.phase,
                 "env_id": self.spec.env_id, "obs_shape": ",".join(map(str, self.spec.schema.obs_shape)),
                 "obs_dtype": self.spec.schema.obs_dtype, "n_actions": self.spec.schema.n_actions,
-                "hidden": ",".join(map(str, self.lcfg.hidden)), "dueling": int(self.lcfg.dueling),
+                "hidden": ",".join(map(str, self.lcfg.hidden)), "dueling": int(self.lcfg.dueling), "cnn": self.lcfg.cnn,
                 "env_steps": sum(self.actor_steps.values()), "elapsed_s": round(time.monotonic() - self.started, 1)}
         try:
             return save_checkpoint(self.agent.online, self.run_dir / "checkpoints" / f"{name}.safetensors", meta)

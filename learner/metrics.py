@@ -150,9 +150,9 @@ class GreedyEval:
     """
 
     def __init__(self, env_cfg: EnvConfig, every: int, episodes: int, seed: int, obs_shape: tuple[int, ...],
-                 n_actions: int, hidden: tuple[int, ...], dueling: bool):
+                 n_actions: int, hidden: tuple[int, ...], dueling: bool, cnn: str = "nature"):
         self.env_cfg, self.every, self.episodes, self.seed = env_cfg, every, episodes, seed
-        self._net_args = (tuple(obs_shape), n_actions, tuple(hidden), dueling)
+        self._net_args = (tuple(obs_shape), n_actions, tuple(hidden), dueling, cnn)
         self.next_at = every
         self.failed: str | None = None
         self._thread: threading.Thread | None = None

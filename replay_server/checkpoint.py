@@ -11,6 +11,11 @@ last checkpoint started (``replay.checkpoint_every_s`` plus the copy time).
 
 The demo table is not checkpointed: it is reloaded from its shard, whose sha256 is verified.
 
+A table of stacked frames (``frames.FrameRingTable``) has ``obs_key`` / ``next_key`` in place of
+``obs`` / ``next_obs``, and its frame ring in ``frames.npy`` + ``frame_key.npy``, copied after the
+rows. Frames overwritten between the two copies belong to the oldest items (the ring is FIFO);
+restore drops those items as the ring would have, and keeps every item whose frames are all there.
+
 Layout of ``<run dir>/replay_checkpoint/``: one ``.npy`` per column (``obs``, ``next_obs``,
 ``action``, ``reward``, ``terminated``, ``truncated``, ``steps``, ``actor``, ``version``, ``key``) and
 ``meta.json`` (format version, schema, counters, per-actor stats).
@@ -29,13 +34,41 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .core import BATCH_HISTORY
+from .frames import FrameRingTable
 
 if TYPE_CHECKING:  # pragma: no cover
     from .core import ReplayCore
 
 FORMAT = 2  # 2: the steps column (n-step returns)
 COLUMNS = ("obs", "next_obs", "action", "reward", "terminated", "truncated", "steps", "actor", "version", "seq", "key")
+FRAME_COLUMNS = ("obs_key", "next_key") + COLUMNS[2:]
 CHUNK_BYTES = 4 * 2**20  # rows copied per lock hold: ~4 MiB
+
+
+def _columns(table) -> tuple[str, ...]:
+    return FRAME_COLUMNS if isinstance(table, FrameRingTable) else COLUMNS
+
+
+def _copy_chunked(core: "ReplayCore", arrays: dict[str, np.ndarray], files: dict) -> np.ndarray:
+    """Write ``arrays`` (same length) into ``files`` as .npy, a chunk per lock hold; returns the
+    last column's values (the keys) as copied."""
+    for name, f in files.items():
+        col = arrays[name]
+        np.lib.format.write_array_header_1_0(f, {"descr": np.lib.format.dtype_to_descr(col.dtype),
+                                                 "fortran_order": False, "shape": col.shape})
+    row_bytes = sum(a.dtype.itemsize * int(np.prod(a.shape[1:], dtype=np.int64)) for a in arrays.values())
+    chunk = max(1, CHUNK_BYTES // max(row_bytes, 1))
+    length = len(next(iter(arrays.values())))
+    last = list(arrays)[-1]
+    copied = []
+    for begin in range(0, length, chunk):
+        end = min(begin + chunk, length)
+        with core._lock:  # short: one chunk copied to memory, then inserts and samples go on
+            parts = {name: arr[begin:end].copy() for name, arr in arrays.items()}
+        copied.append(parts[last])
+        for name, part in parts.items():
+            files[name].write(part.tobytes())
+    return np.concatenate(copied) if copied else np.zeros(0, np.int64)
 
 
 class CheckpointError(ValueError):
@@ -53,24 +86,17 @@ def write_checkpoint(core: "ReplayCore", directory: str | Path) -> dict:
     # Ordinary file writes, not a memmap: on a full disk a memmap copy dies with SIGBUS (measured:
     # the server crashed, restarted 4 times and lost 86 % of the run), a write() raises OSError,
     # which the caller reports and retries later while the previous checkpoint stays valid.
-    names = COLUMNS
+    names = _columns(table)
     files = {name: (tmp / f"{name}.npy").open("wb") for name in names}
+    frames = isinstance(table, FrameRingTable)
+    if frames:
+        files.update({name: (tmp / f"{name}.npy").open("wb") for name in ("frames", "frame_key")})
     try:
-        for name, f in files.items():
-            col = getattr(table, name)
-            np.lib.format.write_array_header_1_0(f, {"descr": np.lib.format.dtype_to_descr(col.dtype),
-                                                     "fortran_order": False, "shape": col.shape})
-        row_bytes = sum(getattr(table, n).dtype.itemsize * int(np.prod(getattr(table, n).shape[1:], dtype=np.int64))
-                        for n in names)
-        chunk = max(1, CHUNK_BYTES // max(row_bytes, 1))
-        items = 0
-        for begin in range(0, table.capacity, chunk):
-            end = min(begin + chunk, table.capacity)
-            with core._lock:  # short: one chunk copied to memory, then inserts and samples go on
-                parts = {name: getattr(table, name)[begin:end].copy() for name in names}
-            items += int((parts["key"] >= 0).sum())
-            for name, part in parts.items():
-                files[name].write(part.tobytes())
+        keys = _copy_chunked(core, {name: getattr(table, name) for name in names},
+                             {name: files[name] for name in names})
+        if frames:  # after the rows: see the module's docstring
+            _copy_chunked(core, {"frames": table.store.frames, "frame_key": table.store.key},
+                          {name: files[name] for name in ("frames", "frame_key")})
         with core._lock:
             meta = {"format": FORMAT, "obs_shape": list(core.schema.obs_shape), "obs_dtype": core.schema.obs_dtype,
                     "n_actions": core.schema.n_actions, "capacity": table.capacity, "inserted": table.inserted,
@@ -80,7 +106,8 @@ def write_checkpoint(core: "ReplayCore", directory: str | Path) -> dict:
                     "batch_history": {k: [list(b) for b in h] for k, h in core.batch_history.items()},
                     "evicted": {k: v[0] for k, v in core._evicted.items()},
                     "evicted_total": dict(core.evicted_total),
-                    "phase": core.phase, "mode": core.mode, "time": time.time(),
+                    "phase": core.phase, "mode": core.mode, "time": time.time(), "tail": table.tail,
+                    "layout": "frames" if frames else "stacks",
                     # Which run wrote it: a server of another run (or another env) refuses to restore it.
                     "identity": dict(core.identity)}
         for f in files.values():
@@ -89,7 +116,7 @@ def write_checkpoint(core: "ReplayCore", directory: str | Path) -> dict:
     finally:
         for f in files.values():
             f.close()
-    meta["items"] = items
+    meta["items"] = items = int((keys >= max(0, meta["tail"])).sum())  # rows dropped since (frames) excluded
     (tmp / "meta.json").write_text(json.dumps(meta))
     old = directory.with_name(directory.name + ".old")
     shutil.rmtree(old, ignore_errors=True)
@@ -98,6 +125,18 @@ def write_checkpoint(core: "ReplayCore", directory: str | Path) -> dict:
     tmp.rename(directory)
     shutil.rmtree(old, ignore_errors=True)
     return {"items": items, "seconds": round(time.monotonic() - started, 3), "path": str(directory)}
+
+
+def _restore_frames(store, frame_key: np.ndarray, frames: np.ndarray) -> None:
+    """Put a checkpoint's frames back at their keys (the newest ones if the ring is now smaller)."""
+    slots = np.flatnonzero(frame_key >= 0)
+    slots = slots[np.argsort(frame_key[slots], kind="stable")][-store.capacity:]
+    if not slots.size:
+        return
+    fkeys = frame_key[slots]
+    store.frames[fkeys % store.capacity] = np.asarray(frames[slots])
+    store.key[fkeys % store.capacity] = fkeys
+    store.inserted = int(fkeys.max()) + 1
 
 
 def _whole_batches(order: np.ndarray, actor: np.ndarray, seq: np.ndarray, index: dict[str, int],
@@ -145,16 +184,27 @@ def restore_checkpoint(core: "ReplayCore", directory: str | Path) -> int:
         if key in ours and theirs.get(key) != ours[key]:
             raise CheckpointError(f"replay checkpoint {directory}: written by a run with {key} {theirs.get(key)!r}, "
                                   f"this run has {ours[key]!r}")
+    table = core.online
+    frames = isinstance(table, FrameRingTable)
+    if meta.get("layout", "stacks") != ("frames" if frames else "stacks"):
+        raise CheckpointError(f"replay checkpoint {directory}: layout {meta.get('layout', 'stacks')} does not match "
+                              f"the run's table")
+    names = _columns(table)
     try:
-        cols = {name: np.load(directory / f"{name}.npy", mmap_mode="r") for name in COLUMNS}
+        cols = {name: np.load(directory / f"{name}.npy", mmap_mode="r")
+                for name in names + (("frames", "frame_key") if frames else ())}
     except (OSError, ValueError) as exc:
         raise CheckpointError(f"replay checkpoint {directory}: {exc}") from None
     keys = np.asarray(cols["key"])
     order = np.argsort(keys, kind="stable")
-    order = order[keys[order] >= 0]
+    order = order[keys[order] >= int(meta.get("tail", 0))]
+    if frames:  # the frames first; then only items whose frames all came back
+        _restore_frames(table.store, np.asarray(cols["frame_key"]), cols["frames"])
+        held = table.store.holds(np.asarray(cols["obs_key"])[order]).all(axis=1) & \
+            table.store.holds(np.asarray(cols["next_key"])[order]).all(axis=1)
+        order = order[held]
     if order.size and np.asarray(cols["steps"])[order].min() < 1:  # the wire refuses such items; so does this
         raise CheckpointError(f"replay checkpoint {directory}: an item with steps < 1")
-    table = core.online
     index = {k: int(v) for k, v in meta.get("actor_index", {}).items()}
     history = {k: {int(seq): (int(steps), int(n)) for seq, steps, n in h}
                for k, h in meta.get("batch_history", {}).items()}
@@ -164,10 +214,12 @@ def restore_checkpoint(core: "ReplayCore", directory: str | Path) -> int:
         # The items go back oldest first into rows 0..n-1 with keys renumbered 0..n-1: no holes and
         # no collisions whatever the old capacity was (keys only identify items for priority updates).
         n = len(order)
-        for name in COLUMNS[:-1]:
+        for name in names[:-1]:
             getattr(table, name)[:n] = np.asarray(cols[name][order])
         table.key[:n] = np.arange(n)
         table.inserted = n
+        if frames and n:  # rows' oldest frames rise with their keys (frames.py): go on from the newest
+            table._floor = int(np.minimum(table.obs_key[:n].min(axis=1), table.next_key[:n].min(axis=1)).max())
         core.actors.update({k: {"lost_items": 0, **v} for k, v in meta.get("actors", {}).items()})
         core._actor_index.update(index)
         used = set(index.values())

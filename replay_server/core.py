@@ -36,6 +36,7 @@ from laneshift.wire import (PriorityUpdate, SampledBatch, SampleRequest, Transit
                             decode_priorities, decode_sample_request, decode_transitions, encode_batch,
                             encode_error)
 
+from .frames import FrameRingTable
 from .rate_limiter import SampleToInsertRatio
 from .sum_tree import SumTree
 from .storage import DemoTable, RingTable
@@ -84,7 +85,10 @@ class ReplayCore:
         else:
             self.demo = DemoTable.empty(schema.obs_shape, schema.obs_dtype)
         self.phase = 1 if cfg.pretrains else 0
-        self.online = RingTable(online_capacity, schema.obs_shape, schema.obs_dtype)
+        if len(schema.obs_shape) == 3:  # stacked frames: each frame held once (frames.py)
+            self.online = FrameRingTable(online_capacity, schema.obs_shape, schema.obs_dtype, cfg.frames_per_item)
+        else:
+            self.online = RingTable(online_capacity, schema.obs_shape, schema.obs_dtype)
         self.limiter = SampleToInsertRatio(cfg.samples_per_insert, cfg.min_size, online_capacity,
                                            cfg.spi_tolerance)
         self.started = time.monotonic()
@@ -163,7 +167,11 @@ class ReplayCore:
                 # Paper: in phase 1 the agent's own transitions are not stored.
                 self.dropped[f"{self.mode}_phase1"] += len(batch)
                 return None
+            tail = self.online.tail
             keys = self.online.insert(batch, self._actor_index[batch.actor])
+            if self.tree is not None and self.online.tail > tail:  # items gone (frame tables: maybe not overwritten)
+                gone = np.arange(tail, self.online.tail) % self.online.capacity
+                self.tree.set(self.demo.size + gone, np.zeros(len(gone)))
             if self.tree is not None:  # new items get the highest priority seen: sampled at least once soon
                 self.tree.set(self.demo.size + self.online.rows_of(keys),
                               np.full(len(keys), self._max_priority ** self.cfg.priority_alpha))
@@ -200,7 +208,10 @@ class ReplayCore:
         """Move an idle actor's state out of the live table (called under the lock); its counters
         stay in the totals, and its row index goes to the next new actor."""
         stats = self.actors.pop(actor)
-        self._free_indices.append(self._actor_index.pop(actor))
+        index = self._actor_index.pop(actor)
+        self._free_indices.append(index)
+        if isinstance(self.online, FrameRingTable):
+            self.online.forget_actor(index)
         self._last_seen.pop(actor, None)
         self._evicted[actor] = (stats, self.batch_history.pop(actor))
         for key in _SUMMED:
@@ -251,7 +262,8 @@ class ReplayCore:
             else:
                 pick = self._rng.integers(0, n_demo + n_online, size=rows)
                 is_demo = pick < n_demo
-                demo_rows, online_rows = pick[is_demo], pick[~is_demo] - n_demo
+                demo_rows = pick[is_demo]
+                online_rows = (self.online.tail + pick[~is_demo] - n_demo) % self.online.capacity
                 weight = np.ones(rows, np.float32)
             batch = self._gather(is_demo, demo_rows, online_rows, req.num_batches, weight)
             if not demo_only:
@@ -297,7 +309,8 @@ class ReplayCore:
             demo_live = self.demos_sampled
             ok_demo = demo & (update.index < self.demo.size) & demo_live
             rows = update.index % self.online.capacity
-            ok_online = ~demo & (self.online.key[rows] == update.index)  # not overwritten since sampled
+            # Not overwritten (nor dropped with its frames) since sampled.
+            ok_online = ~demo & (self.online.key[rows] == update.index) & (update.index >= self.online.tail)
             leaves = np.concatenate([update.index[ok_demo], self.demo.size + rows[ok_online]])
             values = np.concatenate([raw[ok_demo], raw[ok_online]])
             if len(leaves):
@@ -397,6 +410,15 @@ class ReplayCore:
                 "max_version": max(versions, default=-1), "evicted": self.evicted_total["count"],
                 "evictions": self.evicted_total["evictions"]}
 
+    def _frame_stats(self) -> dict[str, Any]:
+        """A frame table's frames: held, written, per item, and items dropped early for frames."""
+        table = self.online
+        if not isinstance(table, FrameRingTable):
+            return {}
+        return {"frames": {"capacity": table.store.capacity, "stored": table.frames_stored,
+                           "per_item": round(table.frames_stored / table.inserted, 3) if table.inserted else None,
+                           "evicted_for_frames": table.evicted_for_frames}}
+
     def stats(self, all_actors: bool = False) -> dict[str, Any]:
         """Counters of everything. ``actors`` lists the first ACTORS_IN_STATS actors by name
         (``all_actors`` lists all: for files and the in-process HTTP views, never for a reply)."""
@@ -417,7 +439,7 @@ class ReplayCore:
                 "uptime_s": round(time.monotonic() - self.started, 3),
                 "tables": {
                     "online": {"size": online_size, "capacity": self.online.capacity, "inserted": self.online.inserted,
-                               "bytes": self.online.nbytes},
+                               "bytes": self.online.nbytes, **self._frame_stats()},
                     "demo": {"size": self.demo.size, "held": self.demo_held.size, "sha256": self.demo_held.sha256,
                              "bytes": self.demo_held.nbytes},
                 },

@@ -14,6 +14,7 @@ from laneshift.config import EnvConfig
 from laneshift.envspec import EnvSpec
 from laneshift.nstep import nstep_arrays
 
+from .frames import fixed_stack_views
 from .storage import DemoTable
 
 
@@ -42,6 +43,9 @@ def load_demo_table(paths: tuple[str, ...] | list[str], spec: EnvSpec, n_step: i
     if n_step > 1:
         reward, next_obs, terminated, steps = nstep_arrays(reward, next_obs, terminated, shard.episode_ids,
                                                            n_step, gamma)
-    return DemoTable(obs=np.ascontiguousarray(shard.observations), action=np.asarray(shard.actions, np.int64),
-                     reward=reward, next_obs=np.ascontiguousarray(next_obs), terminated=terminated,
+    obs, next_obs = np.ascontiguousarray(shard.observations), np.ascontiguousarray(next_obs)
+    if obs.ndim == 4:  # stacked frames: each distinct frame held once (80 KB -> ~10 KB an item, frames.py)
+        obs, next_obs = fixed_stack_views(obs, next_obs)
+    return DemoTable(obs=obs, action=np.asarray(shard.actions, np.int64),
+                     reward=reward, next_obs=next_obs, terminated=terminated,
                      sha256=shard.sha256, metadata=dict(shard.metadata), steps=steps)

@@ -229,7 +229,7 @@ def read_items(core: ReplayCore, name: str, offset: int, limit: int, include_obs
     with core._lock:
         table = core.online if online else core.demo
         total = table.size
-        first = (table.inserted - total) if online else 0  # key of the oldest item
+        first = table.tail if online else 0  # key of the oldest item
         n = max(0, min(limit, total - offset))
         keys = np.arange(first + offset, first + offset + n, dtype=np.int64) if n else np.zeros(0, np.int64)
         rows = keys % table.capacity if online else keys

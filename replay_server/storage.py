@@ -40,6 +40,11 @@ class RingTable:
         return min(self.inserted, self.capacity)
 
     @property
+    def tail(self) -> int:
+        """Key of the oldest live item; live keys are ``tail .. inserted - 1``, in ``size`` rows."""
+        return self.inserted - self.size
+
+    @property
     def nbytes(self) -> int:
         return sum(a.nbytes for a in (self.obs, self.next_obs, self.action, self.reward, self.terminated,
                                       self.truncated, self.steps, self.actor, self.version, self.key, self.seq))
@@ -69,20 +74,20 @@ class RingTable:
 
     def valid(self, keys: np.ndarray) -> np.ndarray:
         """Which keys still refer to stored (not yet evicted) items."""
-        return (keys >= self.inserted - self.size) & (keys < self.inserted)
+        return (keys >= self.tail) & (keys < self.inserted)
 
     def live_keys(self) -> np.ndarray:
-        return np.arange(self.inserted - self.size, self.inserted, dtype=np.int64)
+        return np.arange(self.tail, self.inserted, dtype=np.int64)
 
 
 @dataclass
 class DemoTable:
     """The demo shard's transitions, loaded once and never evicted or modified."""
 
-    obs: np.ndarray
+    obs: np.ndarray  # or a frames.StackView: stacked images held once per frame
     action: np.ndarray
     reward: np.ndarray
-    next_obs: np.ndarray
+    next_obs: np.ndarray  # likewise
     terminated: np.ndarray
     sha256: str
     metadata: dict
@@ -99,7 +104,13 @@ class DemoTable:
         return int(self.action.shape[0])
 
     def _arrays(self) -> tuple[np.ndarray, ...]:
-        return (self.obs, self.action, self.reward, self.next_obs, self.terminated, self.steps)
+        """The arrays that hold the table. ``obs``/``next_obs`` may be views over shared frames
+        (``frames.StackView``: stacked images kept once per frame); those give their arrays."""
+        out: dict[int, np.ndarray] = {}
+        for col in (self.obs, self.action, self.reward, self.next_obs, self.terminated, self.steps):
+            for arr in getattr(col, "arrays", (col,)):
+                out.setdefault(id(arr), arr)  # the frames obs and next_obs share count once
+        return tuple(out.values())
 
     @property
     def nbytes(self) -> int:
@@ -115,7 +126,8 @@ class DemoTable:
         return h.hexdigest()
 
     def subset(self, rows: np.ndarray) -> "DemoTable":
-        return DemoTable(self.obs[rows], self.action[rows], self.reward[rows], self.next_obs[rows],
+        pick = (lambda col: col.subset(rows)) if hasattr(self.obs, "subset") else (lambda col: col[rows])
+        return DemoTable(pick(self.obs), self.action[rows], self.reward[rows], pick(self.next_obs),
                          self.terminated[rows], self.sha256, self.metadata, self.steps[rows])
 
     @classmethod

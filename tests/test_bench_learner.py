@@ -26,7 +26,9 @@ def test_bench_learner_json_shape(capsys) -> None:
     nets = {c["name"]: (c["network"], c["obs_shape"], c["obs_dtype"], c["batch"]) for c in out["cases"]}
     assert nets == {"mlp-b256": ("MLPQNetwork", [82], "float32", 256),
                     "cnn-b32": ("NatureCNN", [4, 100, 100], "uint8", 32),
-                    "cnn-b64": ("NatureCNN", [4, 100, 100], "uint8", 64)}
+                    "cnn-b64": ("NatureCNN", [4, 100, 100], "uint8", 64),
+                    "small-b32": ("SmallCNN", [4, 100, 100], "uint8", 32),
+                    "small-b64": ("SmallCNN", [4, 100, 100], "uint8", 64)}
     for case in out["cases"]:
         assert case["params"] > 0 and case["n_actions"] == 9
         for impl in ("learner", "bare"):

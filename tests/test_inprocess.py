@@ -3,6 +3,8 @@ learner logic, with every message still encoded and decoded by the wire contract
 
 from __future__ import annotations
 
+import numpy as np
+
 from laneshift.actors.worker import expand_version_runs
 from laneshift.config import load_run_config
 from laneshift.deploy.inprocess import train_inprocess
@@ -52,3 +54,20 @@ def test_stop_return_ends_the_run_at_the_first_episode_that_reaches_it(tmp_path)
     reason = result["learner"]["stop_reason"]
     assert reason["criterion"] == "stop_return" and reason["episode"] == 1
     assert sum(w["env_steps"] for w in result["workers"]) < 100_000  # stopped long before the budget
+
+
+def test_pixel_run_learns_from_frames_held_once_each(tmp_path):
+    """The paper's observation end to end (issue 16): 4 x 100 x 100 uint8 frames from the env, on the
+    wire, in a frame table that holds each frame about once, into the small CNN's updates."""
+    cfg = load_run_config(overrides={**FAST, "env.scenario": "straight", "env.observation": "grayscale",
+                                     "learner.cnn": "small", "train.env_steps": 600, "actor.send_every": 20,
+                                     "replay.capacity": 2000, "train.run_dir": str(tmp_path)})
+    result = train_inprocess(cfg)
+    replay = result["replay"]
+    assert replay["obs_shape"] == [4, 100, 100] and np.dtype(replay["obs_dtype"]) == np.uint8
+    online = replay["tables"]["online"]
+    assert online["inserted"] == 600 and replay["rejected"] == {}
+    # About one new frame a step; episodes here are short (crashes under a random policy), and each
+    # start stores its first frames, so well under the 8 that whole stacks would take.
+    assert online["frames"]["per_item"] < 2.5 and online["frames"]["evicted_for_frames"] == 0
+    assert result["updates"] > 0 and result["updates"] * 32 == replay["sampled_rows"]

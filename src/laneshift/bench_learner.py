@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import dataclasses
 import json
 import platform
 import statistics
@@ -58,12 +59,15 @@ class Case:
     obs_shape: tuple[int, ...]
     obs_dtype: str
     batch: int
+    cnn: str = "nature"  # learner.cnn, for image observations
 
 
 CASES = (
     Case("mlp-b256", (82,), "float32", 256),  # env.observation=vector, the default
     Case("cnn-b32", (4, 100, 100), "uint8", 32),  # env.observation=grayscale (the paper's)
     Case("cnn-b64", (4, 100, 100), "uint8", 64),
+    Case("small-b32", (4, 100, 100), "uint8", 32, "small"),  # learner.cnn=small: the pixel runs' network
+    Case("small-b64", (4, 100, 100), "uint8", 64, "small"),
 )
 
 
@@ -156,7 +160,7 @@ def learner_step(case: Case, cfg: LearnerConfig) -> tuple[Callable[[], None], to
     """One ``DoubleDQN.update`` per call, cycling over the parts of one decoded SampledBatch."""
     from laneshift.learner.dqn import DoubleDQN
 
-    agent = DoubleDQN(case.obs_shape, N_ACTIONS, cfg)
+    agent = DoubleDQN(case.obs_shape, N_ACTIONS, dataclasses.replace(cfg, cnn=case.cnn))
     parts = _split(sampled_batch(case, cfg.prefetch))
     state = {"i": 0}
 
@@ -174,7 +178,7 @@ def bare_step(case: Case, cfg: LearnerConfig, device: torch.device) -> Callable[
     from laneshift.learner.networks import build_q_network
 
     torch.manual_seed(cfg.seed)
-    online = build_q_network(case.obs_shape, N_ACTIONS, cfg.hidden, cfg.dueling).to(device)
+    online = build_q_network(case.obs_shape, N_ACTIONS, cfg.hidden, cfg.dueling, case.cnn).to(device)
     target = copy.deepcopy(online).requires_grad_(False)
     # The learner's optimizer (fused Adam, learner/dqn.py): "the same optimizer" is the fair bar.
     opt = torch.optim.Adam(online.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay, fused=device.type in ("cpu", "cuda"))

@@ -155,6 +155,9 @@ class _Patcher:
         return b"".join((p0, b"%-16d" % vals[self.order[0]], p1, b"%-16d" % vals[self.order[1]], p2))
 
 
+MESSAGES_PER_ACTOR = 4
+
+
 def synthetic_message(actor: str, schema: wire.TransitionSchema, rows: int, rng: np.random.Generator) -> _Patcher:
     """Random but valid transitions for ``schema``, encoded once with placeholder counters."""
     shape = (rows, *schema.obs_shape)
@@ -162,6 +165,11 @@ def synthetic_message(actor: str, schema: wire.TransitionSchema, rows: int, rng:
     if dtype.kind == "f":
         obs = rng.standard_normal(shape).astype(dtype)
         next_obs = rng.standard_normal(shape).astype(dtype)
+    elif len(schema.obs_shape) == 3:  # a frame-stacking env's stream: each item one new frame
+        stack = schema.obs_shape[0]
+        frames = rng.integers(0, 256, size=(rows + stack, *schema.obs_shape[1:]), dtype=np.uint8).astype(dtype)
+        obs = np.stack([frames[i:i + stack] for i in range(rows)])
+        next_obs = np.stack([frames[i + 1:i + 1 + stack] for i in range(rows)])
     else:
         obs = rng.integers(0, 256, size=shape, dtype=np.uint8).astype(dtype)
         next_obs = rng.integers(0, 256, size=shape, dtype=np.uint8).astype(dtype)
@@ -198,7 +206,10 @@ def _publisher_main(argv: list[str]) -> int:
     schema = wire.TransitionSchema(tuple(int(d) for d in a.obs_shape.split(",")), a.obs_dtype, a.n_actions)
     actors = a.actors.split(",")
     rng = np.random.default_rng(a.seed)
-    patchers = [synthetic_message(actor, schema, a.batch, rng) for actor in actors]
+    # A few distinct messages per actor, sent in turn: a frame table (replay_server/frames.py) then
+    # finds each message's frames new, as with a real env, not remembered from the last send.
+    patchers = [[synthetic_message(actor, schema, a.batch, rng) for _ in range(MESSAGES_PER_ACTOR)]
+                for actor in actors]
     sent = [0] * len(actors)
     rows = a.batch
     with transport.open_session(TransportConfig(router=a.router, run_id=a.run_id)) as session:
@@ -226,7 +237,7 @@ def _publisher_main(argv: list[str]) -> int:
                 break
             for k in range(len(pubs)):
                 s = sent[k]
-                pubs[k].put(patchers[k].build(s, (s + 1) * rows))
+                pubs[k].put(patchers[k][s % MESSAGES_PER_ACTOR].build(s, (s + 1) * rows))
                 sent[k] = s + 1
                 total += rows
                 if a.rate > 0:  # paced: sleep until this message's slot
@@ -641,6 +652,7 @@ def bench(args: argparse.Namespace, log: TextIO = sys.stderr) -> dict:
         result["ingest_grayscale"] = g
         online = b.stats("benchgray")["tables"]["online"]
         result["bytes_per_transition_grayscale"] = online["bytes"] / online["capacity"]
+        result["grayscale_frames"] = online.get("frames")  # frames held per item (replay_server/frames.py)
         b.stop_server("benchgray")
 
         result["met"] = {"ingest_vector": result["ingest_vector_per_s"] >= TARGET_INGEST_VECTOR_PER_S,

@@ -160,6 +160,10 @@ class ReplayConfig:
     # Per-actor state is bounded (4,096 actors); a new actor beyond that evicts the actor idle
     # longest, if it has been idle this long, else it is refused (counted as too_many_actors).
     actor_idle_evict_s: float = 600.0
+    # Stacked image observations are held once per frame (replay_server/frames.py): a ring of this
+    # many frames per item of capacity. About 1 new frame an item in steady state; when the ring
+    # runs out first, the oldest items go early (stats: online.frames.evicted_for_frames).
+    frames_per_item: float = 2.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -183,6 +187,7 @@ class ReplayConfig:
         _check(self.samples_per_insert >= 0, "replay.samples_per_insert", "must be >= 0", self.samples_per_insert)
         _check(self.spi_tolerance >= 0, "replay.spi_tolerance", "must be >= 0", self.spi_tolerance)
         _check(self.seed >= 0, "replay.seed", "must be >= 0", self.seed)
+        _check(self.frames_per_item >= 1.0, "replay.frames_per_item", "must be >= 1", self.frames_per_item)
 
     @property
     def retains_demos(self) -> bool:
@@ -206,6 +211,9 @@ class LearnerConfig:
     n_step: int = 1
     batch_size: int = 256  # MATLAB minibatch 256
     hidden: tuple[int, ...] = (256, 256)  # MLP for vector observations (CNN for grayscale)
+    # The CNN for grayscale frames: nature (Mnih et al. 2015) or small (learner/networks.py SmallCNN,
+    # about 3x the updates/s on 2 CPU cores; what the pixel Table 2 runs use).
+    cnn: str = "nature"
     target_update_period: int = 500  # updates between hard target-network syncs
     huber_delta: float = 1.0
     grad_clip: float = 10.0  # global-norm gradient clipping (MATLAB threshold: 1)
@@ -238,6 +246,7 @@ class LearnerConfig:
 
     def __post_init__(self) -> None:
         _check(self.lr > 0, "learner.lr", "must be > 0", self.lr)
+        _check(self.cnn in ("nature", "small"), "learner.cnn", "must be nature or small", self.cnn)
         _check(0.0 <= self.gamma <= 1.0, "learner.gamma", "must be in [0, 1]", self.gamma)
         _check(not isinstance(self.n_step, bool) and isinstance(self.n_step, int) and 1 <= self.n_step <= 255,
                "learner.n_step", "must be an int in [1, 255]", self.n_step)

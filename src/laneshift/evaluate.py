@@ -119,7 +119,8 @@ def load_checkpoint_policy(checkpoint: str | Path) -> CheckpointPolicy:
         n_actions = int(meta["n_actions"])
     except (KeyError, ValueError):
         raise ValueError(f"checkpoint {checkpoint}: missing laneshift metadata (obs_shape, hidden, n_actions)") from None
-    policy = QPolicy(obs_shape, n_actions, hidden, dueling=meta.get("dueling", "0") == "1")
+    policy = QPolicy(obs_shape, n_actions, hidden, dueling=meta.get("dueling", "0") == "1",
+                     cnn=meta.get("cnn", "nature"))  # checkpoints from before the choice: Nature
     policy.load_tensors(tensors)
     return CheckpointPolicy(policy, obs_shape, n_actions, meta)
 
