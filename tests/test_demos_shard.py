@@ -16,7 +16,6 @@ import numpy as np
 import pytest
 
 from laneshift.demos import (
-    DATASET_ID,
     ShardError,
     generate_shard,
     load_shard,
@@ -108,7 +107,7 @@ def test_plain_minari_reads_it(lka_shard: Path, monkeypatch: pytest.MonkeyPatch)
 
     shard = load_shard(lka_shard)
     monkeypatch.setenv("MINARI_DATASETS_PATH", str(lka_shard))
-    dataset = minari.load_dataset(DATASET_ID)
+    dataset = minari.load_dataset(shard.metadata["dataset_id"])  # the shard's own id
     assert dataset.total_episodes == 4 and dataset.total_steps == len(shard)
     assert dataset.action_space == gym.spaces.Discrete(31)
     for episode in dataset.iterate_episodes():

@@ -6,6 +6,8 @@ The lead's CLI calls :func:`register` on the ``demos`` sub-parsers; each sub-com
 Example::
 
     laneshift demos generate --scenario straight --episodes 50 --out runs/demos/straight
+    laneshift demos generate --scenario straight --episodes 50 --out runs/demos/stand-in \
+        --driver human-like          # scripted driver + reaction delay + action noise; not a person
     laneshift demos record --scenario straight --episodes 20 --out runs/demos/human
     laneshift demos inspect runs/demos/straight        # also writes runs/demos/straight_returns.png
 """
@@ -19,7 +21,16 @@ from pathlib import Path
 from typing import Any
 
 from ..cli import non_negative_float, non_negative_int, positive_float, positive_int
+from .humanlike import DEFAULT_ACTION_NOISE, DEFAULT_REACTION_STEPS
 from .shard import ShardError
+
+
+def _probability(text: str) -> float:
+    """A float in [0, 1] (argparse type)."""
+    value = non_negative_float(text)
+    if value > 1:
+        raise argparse.ArgumentTypeError(f"must be a probability in [0, 1], got {text}")
+    return value
 
 
 def _json_or_str(text: str) -> Any:
@@ -66,9 +77,13 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     from .shard import read_metadata
 
     try:
+        if args.driver != "human-like" and (args.reaction_steps is not None
+                                            or args.action_noise is not None):
+            raise ValueError("--reaction-steps / --action-noise need --driver human-like")
         path = generate_shard(args.out, env_id_or_scenario=args.scenario,
                               env_kwargs=env_kwargs_from_args(args), episodes=args.episodes,
-                              seed=args.seed, progress="demos generate")
+                              seed=args.seed, progress="demos generate", policy=args.driver,
+                              reaction_steps=args.reaction_steps, action_noise=args.action_noise)
     except (FileExistsError, ValueError) as exc:  # bad arguments / existing output
         print(f"{_prog(args)}: {exc}", file=sys.stderr)
         return 2
@@ -76,6 +91,8 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     print(f"wrote {path}: {meta['episodes']} episodes, {meta['steps']} steps of {meta['env_id']} "
           f"in {meta.get('generation_seconds', float('nan')):.1f} s; demonstrator survival "
           f"{_rate(meta.get('survival_rate'))}, achievement {_rate(meta.get('achievement_rate'))}")
+    if args.driver == "human-like":  # never let a stand-in pass for a person
+        print(f"recorded by: {meta['recorded_by']}")
     return 0
 
 
@@ -142,6 +159,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                           help="shard directory to create (must not exist or be empty)")
     generate.add_argument("--seed", type=non_negative_int, default=0,
                           help="episode i is reset with seed SEED+i (default 0)")
+    generate.add_argument("--driver", choices=("scripted", "human-like"), default="scripted",
+                          help="scripted: the rule-based expert (default); human-like: a stand-in "
+                               "for a person (the expert with a reaction delay and action noise, "
+                               "labelled 'not a person' in the shard)")
+    generate.add_argument("--reaction-steps", type=non_negative_int,
+                          help="human-like: act on the state of this many steps ago "
+                               f"(default {DEFAULT_REACTION_STEPS}, calibrated; see docs/demos.md)")
+    generate.add_argument("--action-noise", type=_probability,
+                          help="human-like: probability of a uniformly random action instead "
+                               f"(default {DEFAULT_ACTION_NOISE:g}, calibrated)")
     generate.set_defaults(func=_cmd_generate)
 
     record = subparsers.add_parser(

@@ -4,6 +4,8 @@ The demos package never hard-codes an environment: it takes a gymnasium id (or o
 laneshift's scenario short names) plus flat env kwargs. laneshift's own ids are registered by
 importing ``laneshift.actors.envs``; any other registered gymnasium id works as well.
 
+Imports: gymnasium and, lazily, ``laneshift.actors.envs``.
+
 Example::
 
     >>> resolve_env_id("CartPole-v1")
@@ -21,10 +23,13 @@ from typing import Any
 import gymnasium as gym
 
 
+ENVS_MODULE = "laneshift.actors.envs"  # importing it registers laneshift's gymnasium ids
+
+
 def _laneshift_envs() -> Any | None:
     """The ``laneshift.actors.envs`` module (registers the laneshift ids), or None if absent."""
     try:
-        return importlib.import_module("laneshift.actors.envs")
+        return importlib.import_module(ENVS_MODULE)
     except ImportError:
         return None
 
@@ -68,3 +73,17 @@ def make_env(env_id: str, env_kwargs: dict[str, Any], **extra: Any) -> gym.Env:
         if "unexpected keyword argument" not in str(exc):
             raise
         raise ValueError(f"{env_id}: {exc}".split(" was raised from")[0]) from None
+
+
+def gymnasium_make_id(env_id: str) -> str:
+    """The id ``gymnasium.make`` takes in a fresh process: laneshift's ids need the module that
+    registers them (``laneshift.actors.envs:laneshift/StraightLaneChange-v0``); others as given.
+
+    Example::
+
+        >>> gymnasium_make_id("CartPole-v1")
+        'CartPole-v1'
+    """
+    if ":" not in env_id and env_id in scenarios().values():
+        return f"{ENVS_MODULE}:{env_id}"
+    return env_id

@@ -1,11 +1,15 @@
 """Generate a demo shard by letting a scripted demonstrator drive the env.
 
 ``policy="scripted"`` uses laneshift's experts from ``laneshift.actors.envs.demonstrator``
-(``ScriptedDriver`` for the lane-change scenarios, ``LKAExpert`` for LKA); any other callable
+(``ScriptedDriver`` for the lane-change scenarios, ``LKAExpert`` for LKA);
+``policy="human-like"`` the same experts with a reaction delay and action noise
+(:mod:`.humanlike`, a stand-in for a person, labelled as such in the shard); any other callable
 with the same shape works: ``policy(env)`` returns a driver and ``driver(obs)`` an
 action index. A fresh driver is made for every episode, so drivers need no reset method.
 Episode ``i`` is reset with seed ``seed + i`` (and the action space seeded with ``seed``), so
 the same arguments give the same shard, checksum included.
+
+Imports: numpy, gymnasium, the demos package; laneshift's demonstrators lazily.
 
 Example::
 
@@ -29,6 +33,8 @@ import numpy as np
 from ..progress import progress as progress_bar
 from .envsupport import make_env, resolve_env_id
 from .writer import check_out_dir, write_shard
+
+POLICIES = ("scripted", "human-like")
 
 Driver = Callable[[Any], Any]  # observation -> action index
 PolicyFactory = Callable[[gym.Env], Driver]  # env -> driver, like ScriptedDriver(env)
@@ -89,22 +95,45 @@ def generate_shard(
     seed: int,
     policy: str | PolicyFactory = "scripted",
     progress: str | None = None,
+    reaction_steps: int | None = None,
+    action_noise: float | None = None,
 ) -> Path:
     """Run ``episodes`` demonstrator episodes and write them as a shard at ``out_dir``.
 
     ``progress``: the label of a progress bar over the episodes on stderr; None: quiet.
+    ``reaction_steps`` / ``action_noise``: the human-like stand-in's delay and noise (only with
+    ``policy="human-like"``; default the calibrated :data:`~.humanlike.DEFAULT_REACTION_STEPS`,
+    :data:`~.humanlike.DEFAULT_ACTION_NOISE`).
 
     The shard's metadata records the demonstrator's ``survival_rate`` (share of episodes
     without a crash) and ``achievement_rate`` (share ending on the target lane), each None
-    when the env's info does not report it, plus ``demonstrator`` and ``base_seed``.
+    when the env's info does not report it, plus ``demonstrator``, ``driver`` and
+    ``base_seed``; a human-like shard has ``recorded_by`` = its stand-in label and its
+    ``reaction_steps`` / ``action_noise``.
     """
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, not {episodes}")
+    if policy != "human-like" and (reaction_steps is not None or action_noise is not None):
+        raise ValueError("reaction_steps / action_noise are parameters of policy 'human-like'")
     check_out_dir(out_dir)  # fail before driving, not after
+    # Imported here, not at the top: `python -m laneshift.demos.humanlike` (the calibration)
+    # must not find its module already imported by the package.
+    from .humanlike import DEFAULT_ACTION_NOISE, DEFAULT_REACTION_STEPS, HumanLikePolicy
+
+    recorded_by, driver_kind, extra = "scripted", "scripted", {}
+    human_like: HumanLikePolicy | None = None
     if isinstance(policy, str):
-        if policy != "scripted":
-            raise ValueError(f"policy must be 'scripted' or a callable, not {policy!r}")
-        policy = scripted_driver
+        if policy not in POLICIES:
+            raise ValueError(f"policy must be one of {POLICIES} or a callable, not {policy!r}")
+        if policy == "human-like":
+            human_like = HumanLikePolicy(
+                seed, DEFAULT_REACTION_STEPS if reaction_steps is None else reaction_steps,
+                DEFAULT_ACTION_NOISE if action_noise is None else action_noise)
+            recorded_by, driver_kind, policy = human_like.label, "human-like", human_like
+        else:
+            policy = scripted_driver
+    else:
+        driver_kind = "custom"
     env_id = resolve_env_id(env_id_or_scenario)
     env = make_env(env_id, env_kwargs)
     try:
@@ -113,21 +142,26 @@ def generate_shard(
         recorded, names = [], set()
         for i in progress_bar(range(episodes), desc=progress or "", unit="episode", disable=progress is None):
             driver = policy(env)  # fresh per episode: no state leaks between episodes
-            names.add(_driver_name(policy, driver))
+            # The stand-in wraps the expert: name the expert that it degrades.
+            names.add(_driver_name(policy, getattr(driver, "inner", driver) if human_like else driver))
             recorded.append(run_episode(env, driver, seed + i))
         seconds = time.perf_counter() - started
+        if human_like is not None:
+            extra = human_like.metadata(env)
         return write_shard(
             out_dir,
             recorded,
             env_id=env_id,
             env_kwargs=env_kwargs,
-            recorded_by="scripted",
+            recorded_by=recorded_by,
             seeds=[seed + i for i in range(episodes)],
             env=env,
             extra_metadata={
+                "driver": driver_kind,
                 "demonstrator": ", ".join(sorted(names)),
                 "base_seed": seed,
                 "generation_seconds": round(seconds, 3),
+                **extra,
             },
         )
     finally:

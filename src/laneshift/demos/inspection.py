@@ -1,7 +1,10 @@
 """Summaries of a demo shard: sizes, returns, success rates, action histogram, return plot.
 
 ``summarize`` takes a loaded ``DemoShard`` or, cheaper, the verified per-episode data of
-``read_verified`` (no flat copy of the observations).
+``read_verified`` (no flat copy of the observations). A human-like stand-in's shard shows its
+label ("... not a person") and its reaction delay / action noise.
+
+Imports: numpy, matplotlib (lazily, for the plot), the demos package.
 
 Example::
 
@@ -50,6 +53,13 @@ def summarize(source: DemoShard | ShardEpisodes) -> dict[str, Any]:
         "obs_dtype": meta["obs_dtype"],
         "obs_encoding": meta.get("obs_encoding"),
         "recorded_by": meta.get("recorded_by"),
+        # The stand-in's parameters (None for people and the scripted expert).
+        "stand_in": bool(meta.get("stand_in", False)),
+        "reaction_steps": meta.get("reaction_steps"),
+        "reaction_delay_s": meta.get("reaction_delay_s"),
+        "action_noise": meta.get("action_noise"),
+        "dataset_id": meta.get("dataset_id"),
+        "info_keys": list(meta.get("info_keys") or []),
         "sha256": meta["sha256"],
         "episodes": int(len(returns)),
         "steps": int(lengths.sum()),
@@ -85,6 +95,15 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"observation  {summary['observation']} {tuple(summary['obs_shape'])} "
         f"{summary['obs_dtype']} (stored as {summary['obs_encoding']})",
         f"recorded by  {summary['recorded_by']}",
+    ]
+    if summary.get("stand_in"):
+        delay = summary.get("reaction_delay_s")
+        lines.append(f"stand-in     reaction delay {summary['reaction_steps']} steps"
+                     + (f" ({delay:g} s)" if delay is not None else "")
+                     + f", action noise {summary['action_noise']:g}: NOT a person's driving")
+    lines += [
+        f"dataset id   {summary.get('dataset_id')}  (per-step infos: "
+        f"{', '.join(summary.get('info_keys') or []) or 'none'})",
         f"sha256       {summary['sha256']}",
         f"episodes     {summary['episodes']}  ({summary['terminated_episodes']} terminated, "
         f"{summary['truncated_episodes']} truncated)",
@@ -118,8 +137,8 @@ def plot_returns(summary: dict[str, Any], png: str | os.PathLike) -> Path:
                    label=f"mean {returns.mean():.2f}")
         ax.set_xlabel("episode return")
         ax.set_ylabel("episodes")
-        ax.set_title(f"{summary['env_id']} — {summary['episodes']} "
-                     f"{summary['recorded_by']} episodes", fontsize=10)
+        who = "human-like stand-in" if summary.get("stand_in") else summary["recorded_by"]
+        ax.set_title(f"{summary['env_id']} — {summary['episodes']} {who} episodes", fontsize=10)
         ax.legend()
         fig.tight_layout()
         fig.savefig(png)

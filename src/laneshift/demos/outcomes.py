@@ -2,13 +2,17 @@
 
 Both are read from the episode's final ``info`` dict: ``info["crashed"]`` (highway-env's flag,
 which laneshift's envs also set when the car leaves the road) and ``info["on_target_lane"]``.
+As in the paper (and ``laneshift.evaluate``), an episode achieves only if it is on the target
+lane at its last step *without* having crashed: a crash on the target lane is no achievement.
 A missing key gives None ("unknown"), and a rate over episodes is None unless every episode
 knows it.
+
+Imports: numpy only.
 
 Example::
 
     >>> outcome_rates([episode_outcome({"crashed": False, "on_target_lane": True}),
-    ...                episode_outcome({"crashed": True, "on_target_lane": False})])
+    ...                episode_outcome({"crashed": True, "on_target_lane": True})])
     {'survival_rate': 0.5, 'achievement_rate': 0.5}
 """
 
@@ -45,5 +49,7 @@ def outcome_rates(outcomes: Sequence[Mapping[str, bool | None]]) -> dict[str, fl
     if outcomes and all(c is not None for c in crashed):
         survival = float(np.mean([not c for c in crashed]))
     if outcomes and all(t is not None for t in on_target):
-        achievement = float(np.mean(on_target))
+        # A crashed episode never reaches the paper's step 300 on the target lane; with the
+        # crash unknown (None) only the lane is known and counts.
+        achievement = float(np.mean([bool(t) and not c for t, c in zip(on_target, crashed)]))
     return {"survival_rate": survival, "achievement_rate": achievement}

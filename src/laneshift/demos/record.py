@@ -156,7 +156,8 @@ class KeyboardSession:
         status = (f"episode {len(self.result.episodes) + 1}/{self.target}"
                   f" (discarded {self.result.discarded})   step {len(self.episode.actions)}")
         if info.get("lane_index") is not None:
-            status += f"   lane {info['lane_index']} -> target {info.get('target_lane')}"
+            # Lane 0 is the top lane of the picture; the target lane is drawn blue.
+            status += f"   lane {info['lane_index']} -> target lane {info.get('target_lane')} (blue)"
             status += "  ON TARGET" if info.get("on_target_lane") else ""
         action = f"action: {action_label(self.last_action)}" + ("   PAUSED (P)" if self.paused else "")
         return [(status, (240, 240, 240)), (action, (240, 240, 120)), (HELP_TEXT, (170, 170, 170))]

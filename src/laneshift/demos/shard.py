@@ -1,17 +1,20 @@
 """Demo shards: human / scripted demonstrations stored as a Minari dataset (hdf5 backend).
 
-A shard is one directory ``DIR`` that is a Minari datasets root holding one dataset with the
-id ``laneshift-demos-v0`` (:data:`DATASET_ID`)::
+A shard is one directory ``DIR`` that is a Minari datasets root holding one dataset. Its id is
+the shard's own (:func:`shard_dataset_id`): ``laneshift/<scenario>-<driver>-<DIR's name>-v0``,
+e.g. ``laneshift/straight-scripted-straight-v0`` (shards written before per-shard ids hold
+``laneshift-demos-v0``, :data:`LEGACY_DATASET_ID`, and still load)::
 
-    DIR/laneshift-demos-v0/data/metadata.json   Minari metadata + a "laneshift" section
-    DIR/laneshift-demos-v0/data/main_data.hdf5  episode_0 .. episode_{E-1}: observations [T+1,..],
-                               actions [T], rewards [T], terminations [T], truncations [T]
+    DIR/laneshift/<name>-v0/data/metadata.json   Minari metadata + a "laneshift" section
+    DIR/laneshift/<name>-v0/data/main_data.hdf5  episode_0 .. episode_{E-1}: observations
+                               [T+1,..], actions [T], rewards [T], terminations [T],
+                               truncations [T], infos/<key> [T+1]
                                (+ laneshift_stack_prefix [S-1, W, H] for frame-stack encoding)
 
 so plain Minari reads it with ::
 
-    MINARI_DATASETS_PATH=DIR python -c "import minari; print(minari.load_dataset('laneshift-demos-v0'))"
-    # or, without the variable: minari.MinariDataset("DIR/laneshift-demos-v0/data")
+    MINARI_DATASETS_PATH=DIR python -c "import minari; print(minari.load_dataset('laneshift/...-v0'))"
+    # or, without the variable: minari.MinariDataset(dataset_data_dir(DIR))
 
 The replay server reads it with :func:`load_shard` / :func:`load_shards`, which rebuild flat
 transition arrays (:class:`DemoShard`), verify the sha256 recorded at write time and check the
@@ -19,6 +22,9 @@ shard against the run's env.
 
 The checksum covers the flat transition arrays, not the file encoding (scheme in
 :mod:`laneshift.demos.checksum`). Shards are written by :func:`laneshift.demos.writer.write_shard`.
+
+Imports: numpy, h5py (lazily) and the demos package's own helpers; never minari (reading needs
+only the files).
 
 Example::
 
@@ -33,6 +39,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -41,17 +48,62 @@ from typing import Any
 import numpy as np
 
 from .checksum import SHA256_SCHEME, arrays_sha256, episodes_sha256
-from .envsupport import resolve_env_id
+from .envsupport import resolve_env_id, scenarios
 from .framestack import rebuild_frame_stacks
 from .outcomes import outcome_rates
 
 FORMAT = "laneshift-demos"
 FORMAT_VERSION = 1
 RECORDERS = ("human", "scripted")
+# recorded_by of a human-like stand-in starts with this (the full label names its parameters and
+# says "not a person": laneshift.demos.humanlike.stand_in_label).
+STAND_IN_PREFIX = "human-like stand-in"
 PREFIX_DATASET = "laneshift_stack_prefix"  # extra hdf5 dataset per episode (Minari ignores it)
-# The Minari id of the one dataset in a shard directory. Minari ids need a "-vN" suffix, so the
-# directory itself is the datasets root (MINARI_DATASETS_PATH) rather than the dataset.
-DATASET_ID = "laneshift-demos-v0"
+# The Minari id every shard had before shards got their own (shard_dataset_id); such shards
+# still load. Minari ids need a "-vN" suffix, so the shard directory is the datasets root
+# (MINARI_DATASETS_PATH) rather than the dataset itself.
+LEGACY_DATASET_ID = "laneshift-demos-v0"
+DATASET_ID = LEGACY_DATASET_ID  # the old name, kept for code that imported it
+DATASET_NAMESPACE = "laneshift"  # Minari namespace of the per-shard ids
+
+
+def recorder_kind(recorded_by: str) -> str:
+    """``human``, ``scripted`` or ``human-like`` for a ``recorded_by`` value, else ValueError.
+
+    Example::
+
+        >>> recorder_kind("human-like stand-in (scripted driver + ...); not a person")
+        'human-like'
+    """
+    if recorded_by in RECORDERS:
+        return recorded_by
+    if isinstance(recorded_by, str) and recorded_by.startswith(STAND_IN_PREFIX):
+        return "human-like"
+    raise ValueError(f"recorded_by must be one of {RECORDERS} or a '{STAND_IN_PREFIX} ...' "
+                     f"label, not {recorded_by!r}")
+
+
+def _id_part(text: str) -> str:
+    """``text`` reduced to what a Minari dataset name allows (ASCII letters, digits, _ and -)."""
+    return re.sub(r"[^A-Za-z0-9_-]+", "_", text).strip("_-") or "x"
+
+
+def shard_dataset_id(env_id: str, recorded_by: str, out_name: str) -> str:
+    """The Minari id of a shard: ``laneshift/<scenario>-<driver>-<out_name>-v0``.
+
+    ``scenario`` is laneshift's short name for ``env_id`` (else the id, sanitised), ``driver``
+    the recorder kind (:func:`recorder_kind`), ``out_name`` the shard directory's name. Each
+    part keeps only ``[A-Za-z0-9_-]``, so the id fits Minari's ``(namespace/)name-vN`` rule.
+
+    Example::
+
+        >>> shard_dataset_id("CartPole-v1", "scripted", "my demos")
+        'laneshift/CartPole-v1-scripted-my_demos-v0'
+    """
+    names = {env: name for name, env in scenarios().items()}
+    scenario = names.get(env_id, env_id)
+    return (f"{DATASET_NAMESPACE}/{_id_part(scenario)}-{recorder_kind(recorded_by)}-"
+            f"{_id_part(out_name)}-v0")
 
 
 class ShardError(ValueError):
@@ -124,19 +176,31 @@ def assemble_transitions(
 
 
 def dataset_data_dir(path: str | os.PathLike) -> Path:
-    """The Minari data directory of a shard given as ``DIR``, ``DIR/<DATASET_ID>`` or its ``data``.
+    """The Minari data directory of a shard given as ``DIR``, its dataset directory or ``data``.
+
+    ``DIR`` holds one dataset: ``DIR/laneshift/<name>-v0`` (per-shard id) or, for shards written
+    before per-shard ids, ``DIR/laneshift-demos-v0``.
 
     Example::
 
         >>> dataset_data_dir("runs/demos/straight")          # doctest: +SKIP
-        PosixPath('runs/demos/straight/laneshift-demos-v0/data')
+        PosixPath('runs/demos/straight/laneshift/straight-scripted-straight-v0/data')
     """
     path = Path(path)
-    for candidate in (path / DATASET_ID / "data", path / "data", path):
+    for candidate in (path / LEGACY_DATASET_ID / "data", path / "data", path):
         if (candidate / "metadata.json").is_file():
             return candidate
+    # A per-shard id: one level of namespace (laneshift/...), or none for ids without one.
+    found = sorted({meta.parent for pattern in ("*/*/data/metadata.json", "*/data/metadata.json")
+                    for meta in path.glob(pattern)})
+    if len(found) == 1:
+        return found[0]
+    if len(found) > 1:
+        names = ", ".join(str(f.parent.relative_to(path)) for f in found)
+        raise ShardError(f"demo shard {path}: holds {len(found)} datasets ({names}); "
+                         "give the directory of one of them")
     raise ShardError(
-        f"demo shard {path}: not a demo shard (no {DATASET_ID}/data/metadata.json in it)"
+        f"demo shard {path}: not a demo shard (no <dataset id>/data/metadata.json in it)"
     )
 
 
@@ -167,6 +231,8 @@ def _read_metadata(path: Path) -> tuple[Path, dict]:
         raise ShardError(f"demo shard {path}: {meta_file} lacks {', '.join(missing)}")
     meta = dict(meta)
     meta["obs_shape"] = tuple(int(n) for n in meta["obs_shape"])
+    # Shards of before per-shard ids do not record theirs: Minari's own field has it.
+    meta.setdefault("dataset_id", minari_meta.get("dataset_id"))
     if minari_meta.get("total_episodes") != meta["episodes"]:
         raise ShardError(
             f"demo shard {path}: metadata says {meta['episodes']} episodes but Minari "

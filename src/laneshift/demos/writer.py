@@ -5,6 +5,13 @@ Minari's ``DataCollector`` needs jax, so the episodes are handed to Minari as re
 ``MINARI_DATASETS_PATH`` pointed at a staging directory that is then renamed to the output
 directory: nothing is ever written to ``~/.minari`` and a failed write leaves no half shard.
 
+Each shard gets its own Minari dataset id (:func:`laneshift.demos.shard.shard_dataset_id`),
+the env infos that matter per step (``infos/<key>``, :data:`RECORDED_INFO_KEYS`) and an env
+spec whose entry point is an importable ``module:Class``, so ``gymnasium.make(spec)`` (Minari's
+``recover_environment``) rebuilds the env in a fresh process.
+
+Imports: numpy, gymnasium, minari and h5py (both lazily, when writing), the demos package.
+
 Example::
 
     >>> import gymnasium as gym
@@ -21,6 +28,7 @@ Example::
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import datetime as _dt
 import json
 import os
@@ -34,16 +42,24 @@ import gymnasium as gym
 import numpy as np
 
 from .checksum import SHA256_SCHEME, episodes_sha256
-from .envsupport import make_env
+from .envsupport import gymnasium_make_id, make_env
 from .framestack import split_frame_stacks
 from .outcomes import episode_outcome, outcome_rates
 from .shard import (
-    DATASET_ID,
     FORMAT,
     FORMAT_VERSION,
     PREFIX_DATASET,
-    RECORDERS,
+    recorder_kind,
+    shard_dataset_id,
 )
+
+# Per-step env infos stored with the episodes (Minari's ``infos`` group, [T+1] each: the reset
+# info, then one per step). The outcome flags the paper's rates come from, where the car is
+# (lane, target lane, speed) and, for LKA, the errors and steering. A key is stored when every
+# info of every episode has it as a scalar; the rest of the info (e.g. the nested reward terms)
+# is not: rewards are stored anyway and the terms can be recomputed.
+RECORDED_INFO_KEYS = ("crashed", "collided", "offroad", "on_target_lane", "lane_index",
+                      "target_lane", "speed", "e1", "e2", "steering")
 
 
 @contextlib.contextmanager
@@ -129,14 +145,68 @@ def _episode_arrays(
     return arrays
 
 
-def _env_spec_json(env: gym.Env) -> str | None:
-    """The env's spec as JSON for Minari's ``recover_environment``, None if not serialisable."""
-    if env.spec is None:
+def _env_spec_json(env: gym.Env, env_id: str, env_kwargs: Mapping[str, Any]) -> str | None:
+    """The env's spec as JSON for ``gymnasium.make(EnvSpec.from_json(...))`` / Minari's
+    ``recover_environment``; None when it cannot be rebuilt elsewhere.
+
+    The entry point must be an importable ``"module:Class"`` string (laneshift's are, e.g.
+    ``laneshift.actors.envs.lane_change:StraightLaneChangeEnv``): gymnasium imports it itself,
+    so a fresh process needs no registration. ``render_mode`` is dropped (the data does not
+    depend on it; a recorder's ``rgb_array`` would only slow the rebuilt env down).
+    """
+    spec = env.spec
+    if spec is None:  # an env built without gym.make: take the registered spec + the kwargs
+        try:
+            spec = dataclasses.replace(gym.spec(env_id), kwargs=dict(env_kwargs))
+        except (gym.error.Error, ImportError):
+            return None
+    if not isinstance(spec.entry_point, str):  # a callable cannot be serialised or imported
         return None
+    kwargs = {k: v for k, v in spec.kwargs.items() if k != "render_mode"}
     try:
-        return env.spec.to_json()
-    except (TypeError, ValueError):  # callables in the spec (entry point / kwargs)
+        return dataclasses.replace(spec, kwargs=kwargs).to_json()
+    except (TypeError, ValueError):  # kwargs that are not JSON
         return None
+
+
+def _info_scalar(value: Any) -> bool | int | float | None:
+    """A plain bool / int / float for an info value that is one, else None."""
+    if isinstance(value, np.ndarray) and value.shape == ():
+        value = value.item()
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, (bool, int, float)):
+        return value
+    return None
+
+
+def _episode_infos(episodes: Sequence[Mapping[str, Any]],
+                   arrays: Sequence[Mapping[str, np.ndarray]]) -> list[dict[str, np.ndarray]] | None:
+    """Per-episode ``{key: [T+1] array}`` of the :data:`RECORDED_INFO_KEYS` every info has.
+
+    None (nothing stored) unless every episode has ``infos`` with one dict per observation
+    (Minari's convention: the reset info, then one per step) and at least one key qualifies.
+    """
+    all_infos = [ep.get("infos") for ep in episodes]
+    if any(infos is None or len(infos) != len(a["observations"])
+           for infos, a in zip(all_infos, arrays)):
+        return None
+    keys = []
+    for key in RECORDED_INFO_KEYS:
+        values = [_info_scalar(info.get(key)) if isinstance(info, Mapping) else None
+                  for infos in all_infos for info in infos]
+        if all(v is not None for v in values):
+            # One dtype per key for the whole shard: bool, else int64, else float64.
+            if all(isinstance(v, bool) for v in values):
+                keys.append((key, np.dtype(bool)))
+            elif all(isinstance(v, int) and not isinstance(v, bool) for v in values):
+                keys.append((key, np.dtype(np.int64)))
+            else:
+                keys.append((key, np.dtype(np.float64)))
+    if not keys:
+        return None
+    return [{key: np.asarray([_info_scalar(info[key]) for info in infos], dtype=dtype)
+             for key, dtype in keys} for infos in all_infos]
 
 
 def _observation_name(env_kwargs: Mapping[str, Any], obs_space: gym.spaces.Box) -> str:
@@ -157,16 +227,22 @@ def write_shard(
     seeds: Sequence[int | None],
     env: gym.Env | None = None,
     extra_metadata: Mapping[str, Any] | None = None,
+    dataset_id: str | None = None,
 ) -> Path:
     """Write ``episodes`` as a demo shard: ``out_dir`` becomes a Minari root with one dataset.
 
     Each episode is a dict with ``observations`` ([T+1, *obs_shape]: the reset observation then
     one per step), ``actions``, ``rewards``, ``terminations``, ``truncations`` ([T] each) and
     optionally ``infos`` (the info dicts; the last one gives the episode's outcome: crash /
-    on target lane). ``seeds`` holds each episode's reset seed (None if unseeded). ``env`` is
-    the env the episodes came from (its spaces and spec are recorded); when omitted it is built
-    from ``env_id`` + ``env_kwargs``. ``out_dir`` must not exist (an empty directory is fine);
-    it is written under a temporary sibling and renamed, so a failed write leaves nothing.
+    on target lane; with one per observation, [T+1], the :data:`RECORDED_INFO_KEYS` they all
+    have are stored per step). ``recorded_by`` is ``human``, ``scripted`` or a human-like
+    stand-in's label (``laneshift.demos.humanlike.stand_in_label``). ``seeds`` holds each
+    episode's reset seed (None if unseeded). ``env`` is the env the episodes came from (its
+    spaces and spec are recorded); when omitted it is built from ``env_id`` + ``env_kwargs``.
+    ``dataset_id`` is the Minari id (default :func:`~laneshift.demos.shard.shard_dataset_id`
+    of the env, the recorder and ``out_dir``'s name). ``out_dir`` must not exist (an empty
+    directory is fine); it is written under a temporary sibling and renamed, so a failed write
+    leaves nothing.
 
     Example::
 
@@ -175,9 +251,17 @@ def write_shard(
     """
     import minari  # heavy import, only needed here
 
+    from minari.dataset.minari_dataset import parse_dataset_id
+
     out = check_out_dir(out_dir)
-    if recorded_by not in RECORDERS:
-        raise ValueError(f"recorded_by must be one of {RECORDERS}, not {recorded_by!r}")
+    kind = recorder_kind(recorded_by)  # ValueError for anything else
+    if dataset_id is None:
+        dataset_id = shard_dataset_id(env_id, recorded_by, out.name)
+    try:
+        parse_dataset_id(dataset_id)
+    except (ValueError, TypeError) as exc:  # int(None): an id without "-vN"
+        raise ValueError(f"dataset_id {dataset_id!r} is not a Minari id "
+                         "((namespace/)name-vN)") from exc
     if not episodes:
         raise ValueError("no episodes to write")
     seeds = [None if s is None else int(s) for s in seeds]
@@ -196,7 +280,7 @@ def write_shard(
         if not isinstance(obs_space, gym.spaces.Box):
             raise ValueError(f"demo shards need a Box observation space, {env_id} has {obs_space}")
         n_actions = int(action_space.n)
-        spec_json = _env_spec_json(env)
+        spec_json = _env_spec_json(env, env_id, env_kwargs)
     finally:
         if own_env:
             env.close()
@@ -223,20 +307,25 @@ def write_shard(
 
     from minari.data_collector import EpisodeBuffer
 
+    infos = _episode_infos(episodes, arrays)
     buffers = [
         EpisodeBuffer(
             seed=seed, observations=obs, actions=a["actions"], rewards=a["rewards"],
             terminations=a["terminations"], truncations=a["truncations"],
+            infos=None if infos is None else infos[index],
         )
-        for seed, obs, a in zip(seeds, stored_obs, arrays)
+        for index, (seed, obs, a) in enumerate(zip(seeds, stored_obs, arrays))
     ]
     outcomes = [episode_outcome((ep.get("infos") or [None])[-1]) for ep in episodes]
     steps = int(sum(len(a["actions"]) for a in arrays))
     meta: dict[str, Any] = {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
+        "dataset_id": dataset_id,
         "env_id": env_id,
         "env_kwargs": env_kwargs,
+        # What gymnasium.make takes in a fresh process (the module prefix registers the id).
+        "gymnasium_id": gymnasium_make_id(env_id),
         "observation": _observation_name(env_kwargs, obs_space),
         "n_actions": n_actions,
         "obs_shape": list(obs_shape),
@@ -244,6 +333,7 @@ def write_shard(
         "obs_encoding": "frame_stack" if frame_stack else "full",
         "recorded_by": recorded_by,
         "seeds": seeds,
+        "info_keys": [] if infos is None else sorted(infos[0]),
         "sha256": sha,
         "sha256_scheme": SHA256_SCHEME,
         "episodes": len(episodes),
@@ -265,15 +355,16 @@ def write_shard(
             # Minari nags about optional metadata (author e-mail, code permalink, ...).
             warnings.filterwarnings("ignore", category=UserWarning, module=r"minari(\.|$)")
             dataset = minari.create_dataset_from_buffers(
-                dataset_id=DATASET_ID,
+                dataset_id=dataset_id,
                 buffer=buffers,
                 env=None,  # passing the env id would make Minari build a second env
                 observation_space=stored_space,
                 action_space=action_space,
-                algorithm_name=f"laneshift demonstrations ({recorded_by})",
-                author=f"laneshift {recorded_by} demonstrator",
+                algorithm_name=f"laneshift demonstrations ({kind})",
+                author=f"laneshift {kind} demonstrator",
                 description=(
-                    f"laneshift demo shard: {len(episodes)} {recorded_by} episodes on {env_id} "
+                    f"laneshift demo shard: {len(episodes)} episodes recorded by {recorded_by} "
+                    f"on {env_id} "
                     f"with {env_kwargs}; observations stored as {meta['obs_encoding']}"
                 ),
                 jpeg_encoding=False,  # lossless: JPEG would change the frames
