@@ -32,6 +32,17 @@ class ZenohActorLinks:
         self.name = name
         self._sent = 0  # batches sent by this session
         self._base_seq: int | None = None  # the server's next_seq for us before our first batch
+        # A wait on the network says so in the worker's log: one line after a few seconds, then at
+        # most one every 30 s, and one when it is over (transport.WaitLines).
+        router = transport.router_of(session)
+        self._weights_wait = transport.WaitLines(
+            name, f"the learner's weights on {wire.weights_key(run_id)} (router {router})", "got the learner's weights")
+        self._flow_wait = transport.WaitLines(
+            name, f"the replay server to allow inserts on {wire.replay_flow_key(run_id)} (rate limiter; "
+                  f"router {router})", "the replay server allows inserts again")
+        self._replay_wait = transport.WaitLines(
+            name, f"the replay server on {wire.replay_control_key(run_id)} (router {router})",
+            f"the replay server answered on {wire.replay_control_key(run_id)}")
 
     def send_transitions(self, payload: bytes) -> None:
         if not self._transitions.matching_status.matching:
@@ -49,6 +60,10 @@ class ZenohActorLinks:
         a worker it never saw), or None when it did not answer. A restarted worker resumes there."""
         reply = transport.query(self.session, wire.replay_control_key(self.run_id),
                                 wire.encode_json({"cmd": "actor_state", "actor": self.name}), self.timeout_s)
+        if reply is None:
+            self._replay_wait.missed()
+        else:
+            self._replay_wait.answered()
         try:
             body = wire.decode_json(reply) if reply is not None else {}
         except wire.WireError:
@@ -86,13 +101,22 @@ class ZenohActorLinks:
             # Nothing pushed to us (we joined late, or reconnected): ask for the latest.
             self._last_query = time.monotonic()
             data = transport.query(self.session, wire.weights_latest_key(self.run_id), b"", self.timeout_s) or None
+        if data is None:
+            self._weights_wait.missed()
+        else:
+            self._weights_wait.answered()
         return data
 
     def wait_insert_ok(self) -> None:
         """Block while the replay server says the learner is too far behind (rate limiter)."""
         self._update_flow(self._flow.take())
+        if self._insert_ok:
+            return
         while not self._insert_ok and not self.stop_requested():
+            self._flow_wait.missed()
             self._update_flow(self._flow.wait(0.5))
+        if self._insert_ok:
+            self._flow_wait.answered()
 
     def _update_flow(self, data: bytes | None) -> None:
         if data is not None:

@@ -18,6 +18,18 @@ class ChildFailed(RuntimeError):
     pass
 
 
+def terminate(proc: subprocess.Popen, grace_s: float, kill_wait_s: float = 10.0) -> int | None:
+    """SIGTERM ``proc`` (by its PID), SIGKILL if it is still there after ``grace_s``; its exit code."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(grace_s)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(kill_wait_s)
+    return proc.returncode
+
+
 class ProcessGroup:
     def __init__(self, log_dir: Path):
         self.log_dir = Path(log_dir)
@@ -68,14 +80,8 @@ class ProcessGroup:
 
     def stop(self, name: str, grace_s: float = 10.0) -> None:
         proc = self.procs.get(name)
-        if proc is None or proc.poll() is not None:
-            return
-        proc.send_signal(signal.SIGTERM)
-        try:
-            proc.wait(grace_s)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(5)
+        if proc is not None:
+            terminate(proc, grace_s, kill_wait_s=5)
 
     def stop_all(self, grace_s: float = 10.0) -> None:
         # Reverse start order: learner, then replay server, then the router they talk through.

@@ -9,12 +9,14 @@ from __future__ import annotations
 
 import collections
 import threading
-from typing import Protocol
+from typing import Protocol, TypeVar
 
 import zenoh
 
 from laneshift import transport, wire
 from laneshift.config import RunConfig
+
+T = TypeVar("T")
 
 
 class LearnerLinks(Protocol):
@@ -49,21 +51,35 @@ class ZenohLearnerLinks:
         self._stop = transport.StopSignal(session, wire.control_key(self.run_id))
         self._stats_pub = session.declare_publisher(wire.learner_stats_key(self.run_id))
         self._priorities = transport.data_publisher(session, wire.priorities_key(self.run_id))
+        # No answer from the replay server (not started yet, restarting, another run_id) is said in
+        # one line after a few seconds, every 30 s while it lasts, and once when it answers.
+        router = cfg.transport.router
+        self.replay_wait = transport.WaitLines(
+            "learner", f"the replay server on {wire.sample_key(self.run_id)} (router {router})",
+            f"the replay server answered on {wire.sample_key(self.run_id)} (router {router})")
+
+    def _answered(self, reply: T) -> T:
+        """Note whether the replay server answered (any reply, an ERROR too, is an answer)."""
+        if reply is None:
+            self.replay_wait.missed()
+        else:
+            self.replay_wait.answered()
+        return reply
 
     def sample(self, req: wire.SampleRequest) -> wire.SampledBatch | wire.WireError | None:
-        reply = transport.query_ok(self.session, wire.sample_key(self.run_id), wire.encode_sample_request(req),
-                                   self.timeout)
+        reply = self._answered(transport.query_ok(self.session, wire.sample_key(self.run_id),
+                                                  wire.encode_sample_request(req), self.timeout))
         if reply is None or isinstance(reply, wire.WireError):
             return reply
         return wire.decode_batch(reply, self.schema)
 
     def replay_stats(self) -> dict | None:
-        reply = transport.query(self.session, wire.replay_stats_key(self.run_id), b"", self.timeout)
+        reply = self._answered(transport.query(self.session, wire.replay_stats_key(self.run_id), b"", self.timeout))
         return _json_or_none(reply)
 
     def replay_control(self, body: dict) -> dict | None:
-        reply = transport.query(self.session, wire.replay_control_key(self.run_id), wire.encode_json(body),
-                                self.timeout)
+        reply = self._answered(transport.query(self.session, wire.replay_control_key(self.run_id),
+                                               wire.encode_json(body), self.timeout))
         return _json_or_none(reply)
 
     def publish_weights(self, payload: bytes) -> None:

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import collections
 import signal
+import sys
 import threading
 import time
 from collections.abc import Mapping
@@ -498,7 +499,18 @@ def run_learner(cfg: RunConfig) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     spec = env_spec(cfg.env)
-    with transport.open_session(cfg.transport, max_message_bytes=cfg.max_message_bytes) as session:
+    try:
+        # Waits for the router as long as it takes (it may start later; transport.connect_timeout_s
+        # bounds it where the config has one), saying so in a line every 30 s.
+        session = transport.open_session(cfg.transport, max_message_bytes=cfg.max_message_bytes, who="learner",
+                                         stop=stop)
+    except InterruptedError as exc:  # SIGINT/SIGTERM before any router answered
+        print(f"learner: {exc}", flush=True)
+        return 0
+    except ConnectionError as exc:  # the connect timeout passed: one line naming the endpoint
+        print(f"learner: {exc}", file=sys.stderr, flush=True)
+        return 1
+    with session:
         links = ZenohLearnerLinks(session, cfg, spec.schema, stop)
         Learner(cfg, spec, links, stop).run()
     return 0

@@ -15,7 +15,6 @@ import ast
 import json
 import re
 import shlex
-import signal
 import socket
 import subprocess
 import sys
@@ -28,6 +27,7 @@ import pytest
 
 from laneshift import wire
 from laneshift.config import ReplayConfig
+from laneshift.deploy.processes import terminate
 from laneshift.replay_server.core import ReplayCore
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -70,18 +70,6 @@ def wait_ready(path: Path, procs: dict[str, subprocess.Popen], logs: Path, timeo
     pytest.fail(f"no ready file {path} after {timeout_s} s:\n{(logs / 'replay-server.log').read_text()}")
 
 
-def stop(proc: subprocess.Popen, timeout_s: float) -> int:
-    """SIGTERM this process (by its PID), SIGKILL if it is still there after ``timeout_s``."""
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGTERM)
-        try:
-            proc.wait(timeout_s)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(10)
-    return proc.returncode
-
-
 def test_foreign_client_against_a_standalone_replay_server(tmp_path):
     run_dir = tmp_path / "replay-only"
     router_cmd, server_cmd, client_cmd = documented_commands(free_port(), run_dir)
@@ -117,13 +105,13 @@ def test_foreign_client_against_a_standalone_replay_server(tmp_path):
         assert f"HTTP inspection API on http://127.0.0.1:{ready['http_port']} " in log
 
         # §12: stop the server before its router; it exits 0 with its final stats written.
-        assert stop(procs["replay-server"], 60) == 0, (tmp_path / "replay-server.log").read_text()
+        assert terminate(procs["replay-server"], 60) == 0, (tmp_path / "replay-server.log").read_text()
         final = json.loads((run_dir / "replay_stats.json").read_text())
         assert final["tables"]["online"]["inserted"] == 8
-        assert stop(procs["router"], 30) == 0
+        assert terminate(procs["router"], 30) == 0
     finally:
         for proc in reversed(procs.values()):  # the server before its router (§12)
-            stop(proc, 10)
+            terminate(proc, 10)
 
 
 def test_the_example_imports_no_laneshift_code():

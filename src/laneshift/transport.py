@@ -18,6 +18,7 @@ from __future__ import annotations
 import json
 import os
 import socket
+import sys
 import threading
 import time
 from typing import Callable
@@ -125,23 +126,163 @@ def free_tcp_port() -> int:
 
 
 def open_session(cfg: TransportConfig, mode: str = "client", max_message_bytes: int | None = None,
-                 connect_timeout_s: float | None = None) -> zenoh.Session:
+                 connect_timeout_s: float | None = None, who: str | None = None,
+                 stop: threading.Event | None = None) -> zenoh.Session:
     """Open a session; use as ``with open_session(cfg) as s:``. ``max_message_bytes``: the run's
     (``RunConfig.max_message_bytes``); else ``transport.max_message_mb``, else the default.
 
     ``connect_timeout_s``: a client gives up after that long without a router and this raises
-    ConnectionError naming the endpoint (None: it waits for one forever, as services do)."""
+    ConnectionError naming the endpoint. None: the config's ``connect_timeout_s`` if it has one
+    (> 0), else it waits for one forever, as services do (the router may start after them).
+
+    A client still waiting after WAIT_FIRST_LINE_S says so in one line on stderr, ``who`` first
+    (``learner: waiting for the zenoh router at tcp/...:7447 (transport.router) ...``), again
+    every WAIT_LINE_EVERY_S with the time waited, and once more when connected; a caller that set
+    ``connect_timeout_s`` and no ``who`` (a one-shot command: its own error names the endpoint)
+    stays quiet. Nothing is added when the router is there: the open is waited for, not polled.
+    ``stop``: set (a SIGTERM handler) while waiting for the router, this raises InterruptedError."""
     if max_message_bytes is None:
         max_message_bytes = int(cfg.max_message_mb * 2**20) if cfg.max_message_mb else DEFAULT_MAX_MESSAGE_BYTES
+    quiet = connect_timeout_s is not None and who is None
+    if connect_timeout_s is None:
+        # transport.connect_timeout_s, once config.py has it (0 or missing: wait forever).
+        connect_timeout_s = getattr(cfg, "connect_timeout_s", 0.0) or None
     conf = session_config(cfg.router, mode, max_message_bytes, connect_timeout_s)
-    if connect_timeout_s is None or mode != "client":
-        return zenoh.open(conf)
+    if mode != "client":
+        return zenoh.open(conf)  # a router only binds its port: nothing to wait for
+    bound = f", giving up after {connect_timeout_s:g} s" if connect_timeout_s is not None else ""
+    lines = WaitLines(who or "laneshift", f"the zenoh router at {cfg.router} (transport.router{bound})",
+                      f"connected to the zenoh router at {cfg.router}", quiet=quiet)
+    # zenoh.open blocks until a router answers (or its own connect timeout): it runs in a helper
+    # thread so this one can report the wait and see ``stop``.
+    opened: dict[str, object] = {}
+    finished, lock = threading.Event(), threading.Lock()
+
+    def open_it() -> None:
+        try:
+            session = zenoh.open(conf)
+        except BaseException as exc:  # noqa: BLE001 - handed to the caller's thread
+            opened["error"] = exc
+        else:
+            with lock:
+                opened["session"] = session
+                if "abandoned" in opened:  # the caller stopped waiting: nobody will close it
+                    session.close()
+        finally:
+            finished.set()
+
+    threading.Thread(target=open_it, name=f"{who or 'zenoh'}-open", daemon=True).start()
+    # No deadline of our own: with a connect timeout zenoh.open raises by itself when it is up.
+    if not wait_with_lines(lines, finished.wait, stop=stop):
+        # Stopped: the helper thread stays in zenoh.open (it closes what it opens from now on).
+        with lock:
+            opened["abandoned"] = True
+            late = opened.get("session")
+        if late is not None:
+            late.close()  # type: ignore[attr-defined]
+        raise InterruptedError(f"stopped while waiting for the zenoh router at {cfg.router}")
+    if "error" in opened:
+        exc = opened["error"]
+        if connect_timeout_s is not None and isinstance(exc, zenoh.ZError) and "timeout" in str(exc).lower():
+            raise ConnectionError(f"no zenoh router answered at {cfg.router} within {connect_timeout_s:g} s") from None
+        raise exc  # type: ignore[misc]
+    session = opened["session"]
+    _ROUTER_OF[str(session.zid())] = cfg.router  # type: ignore[attr-defined]
+    return session  # type: ignore[return-value]
+
+
+#: The router endpoint each session of this process was opened on (by session zid): zenoh's Session
+#: does not say, and links built on a session name it in their waiting lines.
+_ROUTER_OF: dict[str, str] = {}
+
+
+def router_of(session: zenoh.Session) -> str:
+    """The endpoint ``session`` was opened on by ``open_session`` ("the zenoh router" if another way)."""
     try:
-        return zenoh.open(conf)
-    except zenoh.ZError as exc:
-        if "timeout" not in str(exc).lower():
-            raise
-        raise ConnectionError(f"no zenoh router answered at {cfg.router} within {connect_timeout_s:g} s") from None
+        return _ROUTER_OF.get(str(session.zid()), "the zenoh router")
+    except Exception:  # noqa: BLE001 - a closed session, a stand-in in a test
+        return "the zenoh router"
+
+
+# --------------------------------------------------------------------------- waiting lines (issue 14)
+
+#: A network wait this long says so in one line; that line repeats at most every WAIT_LINE_EVERY_S.
+WAIT_FIRST_LINE_S = 5.0
+WAIT_LINE_EVERY_S = 30.0
+
+
+def _say(line: str) -> None:
+    # stderr: the services' logs hold both streams (their launchers and Ray's log files), and a
+    # command's stdout (JSON for scripts) stays clean.
+    print(line, file=sys.stderr, flush=True)
+
+
+class WaitLines:
+    """The lines of one network wait: what a process is waiting for, said once it waited
+    ``first_after_s``, again at most every ``every_s`` with the time waited (also across waits, so
+    a wait that comes and goes prints no more), and once when it is over if anything was said.
+
+    Feed it with ``missed()`` (another check found nothing) and ``answered()`` (it is there);
+    ``clock`` and ``emit`` are for tests (a fake clock, a list's append).
+
+        >>> out = []; t = [0.0]
+        >>> w = WaitLines("w0", "the learner's weights on laneshift/run/weights", "got weights",
+        ...               clock=lambda: t[0], emit=out.append)
+        >>> for t[0] in (0, 2, 4, 6, 8): w.missed()
+        >>> t[0] = 9.5; w.answered(); out
+        ["w0: waiting for the learner's weights on laneshift/run/weights ...", 'w0: got weights after 9.5 s']
+    """
+
+    def __init__(self, who: str, what: str, done: str, *, first_after_s: float | None = None,
+                 every_s: float | None = None, clock: Callable[[], float] = time.monotonic,
+                 emit: Callable[[str], None] = _say, quiet: bool = False):
+        self.who, self.what, self.done = who, what, done
+        self.first_after_s = WAIT_FIRST_LINE_S if first_after_s is None else first_after_s
+        self.every_s = WAIT_LINE_EVERY_S if every_s is None else every_s
+        self.clock, self.emit, self.quiet = clock, emit, quiet
+        self.since: float | None = None  # when the current wait began (None: not waiting)
+        self._told = False  # a line about the current wait was printed
+        self._last_line = float("-inf")  # when the last waiting line was printed
+
+    def begin(self) -> None:
+        """The wait starts now (if it has not already)."""
+        if self.since is None:
+            self.since = self.clock()
+
+    def missed(self) -> None:
+        """Nothing yet: a line if one is due."""
+        now = self.clock()
+        if self.since is None:
+            self.since = now
+        waited = now - self.since
+        if self.quiet or waited < self.first_after_s or now - self._last_line < self.every_s:
+            return
+        self.emit(f"{self.who}: still waiting for {self.what}, {waited:.0f} s so far" if self._told
+                  else f"{self.who}: waiting for {self.what} ...")
+        self._told, self._last_line = True, now
+
+    def answered(self) -> None:
+        """It is there: the wait is over (a line if the wait was reported)."""
+        if self._told and not self.quiet:
+            self.emit(f"{self.who}: {self.done} after {self.clock() - self.since:.1f} s")
+        self.since, self._told = None, False
+
+
+def wait_with_lines(lines: WaitLines, ready: Callable[[float], bool], timeout_s: float | None = None,
+                    stop: threading.Event | None = None, tick_s: float = 1.0) -> bool:
+    """Wait until ``ready(t)`` (which itself waits up to ``t`` s, e.g. ``Event.wait``) is True,
+    reporting through ``lines``; False when ``timeout_s`` passed or ``stop`` was set first.
+    ``ready`` returning at once on success is what keeps a wait that is not one free of delay."""
+    lines.begin()
+    deadline = None if timeout_s is None else lines.clock() + timeout_s
+    while True:
+        wait_s = tick_s if deadline is None else max(0.0, min(tick_s, deadline - lines.clock()))
+        if ready(wait_s):
+            lines.answered()
+            return True
+        if (stop is not None and stop.is_set()) or (deadline is not None and lines.clock() >= deadline):
+            return False
+        lines.missed()
 
 
 def data_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
