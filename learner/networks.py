@@ -1,4 +1,4 @@
-"""Q-networks: an MLP for vector observations, the Nature CNN for stacked grayscale frames,
+"""Q-networks: an MLP for vector observations, the Nature CNN or a small CNN for stacked grayscale frames,
 each with a plain or a dueling head (Wang et al. 2016: Q = V + A - mean A).
 
     >>> net = build_q_network((25,), 9, hidden=(64, 64))
@@ -52,44 +52,45 @@ class MLPQNetwork(nn.Module):
         return self.net(obs.float())
 
 
-class NatureCNN(nn.Module):
-    """Mnih et al. 2015 on uint8 frames (C, H, W); scales to [0, 1] inside."""
+class _FrameQNetwork(nn.Module):
+    """Convolutions over uint8 frames (C, H, W), scaled to [0, 1] inside, then one hidden layer
+    of ``units`` and the head. Subclasses give the convolutions."""
 
-    def __init__(self, in_shape: tuple[int, int, int], n_actions: int, dueling: bool = False):
+    def __init__(self, features: nn.Sequential, in_shape: tuple[int, int, int], units: int, n_actions: int,
+                 dueling: bool):
         super().__init__()
-        c = in_shape[0]
-        self.features = nn.Sequential(
-            nn.Conv2d(c, 32, 8, stride=4), nn.ReLU(),
-            nn.Conv2d(32, 64, 4, stride=2), nn.ReLU(),
-            nn.Conv2d(64, 64, 3, stride=1), nn.ReLU(), nn.Flatten())
+        self.features = features
         with torch.no_grad():
             flat = self.features(torch.zeros(1, *in_shape)).shape[1]
-        self.head = nn.Sequential(nn.Linear(flat, 512), nn.ReLU(), _head(512, n_actions, dueling))
+        self.head = nn.Sequential(nn.Linear(flat, units), nn.ReLU(), _head(units, n_actions, dueling))
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         return self.head(self.features(obs.float() / 255.0))
 
 
-CNNS = ("nature", "small")
+class NatureCNN(_FrameQNetwork):
+    """Mnih et al. 2015."""
+
+    def __init__(self, in_shape: tuple[int, int, int], n_actions: int, dueling: bool = False):
+        super().__init__(nn.Sequential(
+            nn.Conv2d(in_shape[0], 32, 8, stride=4), nn.ReLU(),
+            nn.Conv2d(32, 64, 4, stride=2), nn.ReLU(),
+            nn.Conv2d(64, 64, 3, stride=1), nn.ReLU(), nn.Flatten()), in_shape, 512, n_actions, dueling)
 
 
-class SmallCNN(nn.Module):
+class SmallCNN(_FrameQNetwork):
     """A pixel learner for 2 CPU cores: Nature's first two convolutions at half the channels, no
     third, a 256-unit layer (1.0 M parameters vs 2.7 M). On this 2-core machine it updates about
-    3x as fast as NatureCNN on 4 x 100 x 100 frames (docs/learner-gpu.md, `laneshift bench
-    learner`), which is what makes hours-long pixel runs possible without a GPU."""
+    3x as fast as NatureCNN on 4 x 100 x 100 frames (`laneshift bench learner`, cases small-b32 and
+    small-b64), which is what makes hours-long pixel runs possible without a GPU."""
 
     def __init__(self, in_shape: tuple[int, int, int], n_actions: int, dueling: bool = False):
-        super().__init__()
-        self.features = nn.Sequential(
+        super().__init__(nn.Sequential(
             nn.Conv2d(in_shape[0], 16, 8, stride=4), nn.ReLU(),
-            nn.Conv2d(16, 32, 4, stride=2), nn.ReLU(), nn.Flatten())
-        with torch.no_grad():
-            flat = self.features(torch.zeros(1, *in_shape)).shape[1]
-        self.head = nn.Sequential(nn.Linear(flat, 256), nn.ReLU(), _head(256, n_actions, dueling))
+            nn.Conv2d(16, 32, 4, stride=2), nn.ReLU(), nn.Flatten()), in_shape, 256, n_actions, dueling)
 
-    def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        return self.head(self.features(obs.float() / 255.0))
+
+CNNS = {"nature": NatureCNN, "small": SmallCNN}
 
 
 def build_q_network(obs_shape: tuple[int, ...], n_actions: int, hidden: tuple[int, ...] = (256, 256),
@@ -100,6 +101,5 @@ def build_q_network(obs_shape: tuple[int, ...], n_actions: int, hidden: tuple[in
     if len(obs_shape) == 3:
         if cnn not in CNNS:
             raise ValueError(f"no CNN {cnn!r} (one of {', '.join(CNNS)})")
-        kind = NatureCNN if cnn == "nature" else SmallCNN
-        return kind(tuple(obs_shape), n_actions, dueling)  # type: ignore[arg-type]
+        return CNNS[cnn](tuple(obs_shape), n_actions, dueling)  # type: ignore[arg-type]
     raise ValueError(f"no Q-network for observation shape {obs_shape}")

@@ -47,11 +47,6 @@ class FrameStore:
         self.key = np.full(self.capacity, -1, np.int64)  # which frame each slot holds (-1: none)
         self.inserted = 0
 
-    @property
-    def oldest(self) -> int:
-        """Key of the oldest frame still held."""
-        return max(0, self.inserted - self.capacity)
-
     def holds(self, keys: np.ndarray) -> np.ndarray:
         return self.key[keys % self.capacity] == keys
 
@@ -72,14 +67,6 @@ class StackView:
 
     def __getitem__(self, rows) -> np.ndarray:
         return self.store.gather(self.keys[rows])
-
-    @property
-    def shape(self) -> tuple[int, ...]:
-        return (self.keys.shape[0], self.keys.shape[1], *self.store.frames.shape[1:])
-
-    @property
-    def dtype(self) -> np.dtype:
-        return self.store.frames.dtype
 
     @property
     def arrays(self) -> tuple[np.ndarray, np.ndarray]:
