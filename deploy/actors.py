@@ -195,7 +195,7 @@ class LearnerActor(_Service):
         cfg = self._begin(plain)
         torch.set_num_threads(cfg.learner.torch_threads)
         builder = Builder(cfg)
-        self.session = transport.open_session(cfg.transport, max_message_bytes=cfg.max_message_bytes)
+        self.session = transport.open_session(cfg.transport, max_message_bytes=cfg.max_message_bytes, who="learner")
         self.learner = builder.learner(builder.learner_links(self.session, self.stop_event), self.stop_event)
 
     def info(self) -> dict[str, Any]:
@@ -229,7 +229,8 @@ class EnvWorkerActor:
         _log_to_run_dir(cfg, self.name)
         _write_pid(cfg, self.name)
         self.where = _where()
-        self.session = transport.open_session(cfg.transport, max_message_bytes=cfg.max_message_bytes)
+        self.session = transport.open_session(cfg.transport, max_message_bytes=cfg.max_message_bytes,
+                                              who=self.name)
         self.links = builder.actor_links(self.session, self.name)
         self.worker = builder.env_worker(index)
 

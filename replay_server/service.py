@@ -235,8 +235,14 @@ class ReplayServer:
             print(f"replay-server: restored {self.restored} items from {self.checkpoint_dir}", flush=True)
         transport.use_service_runtime()
         mode = "router" if self.embedded_router else "client"
-        session = transport.open_session(cfg.transport, mode, cfg.max_message_bytes)
-        ingest_session = transport.open_session(cfg.transport, "client", cfg.max_message_bytes)
+        session = transport.open_session(cfg.transport, mode, cfg.max_message_bytes, who="replay-server",
+                                         stop=self._stop)
+        try:
+            ingest_session = transport.open_session(cfg.transport, "client", cfg.max_message_bytes,
+                                                    who="replay-server", stop=self._stop)
+        except BaseException:
+            transport.close_sessions([session], timeout_s=10.0, who="replay-server")
+            raise
         self._sessions = [ingest_session, session]
         self.service = ReplayService(core, session, cfg.transport.run_id, self.checkpoint_dir,
                                      cfg.replay.checkpoint_every_s, ingest_session).start()
@@ -315,11 +321,20 @@ class ReplayServer:
 def run_replay_server(cfg: RunConfig, *, embedded_router: bool = False, ready_file: str | None = None) -> int:
     """Serve until SIGINT/SIGTERM. Writes ``ready_file`` (JSON) once it is serving."""
     stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
     server = ReplayServer(cfg, embedded_router)
+
+    def on_signal(*_: object) -> None:
+        stop.set()
+        server._stop.set()  # also ends a wait for the router (open_session's stop)
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, on_signal)
     try:
         info = server.start()
+    except InterruptedError as exc:  # SIGINT/SIGTERM before any router answered: nothing was served
+        print(f"replay-server: {exc}", flush=True)
+        server.close()
+        return 0
     except CheckpointError as exc:
         print(f"replay-server: {exc}; remove it or start with replay.restore=false", file=sys.stderr)
         return 2

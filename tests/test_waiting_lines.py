@@ -313,3 +313,37 @@ def test_a_learner_stopped_while_waiting_for_its_router_exits_at_once(tmp_path):
         assert line == f"learner: stopped while waiting for the zenoh router at {endpoint}"
     finally:
         terminate(learner, 10)
+
+
+def replay_server_argv(endpoint: str, run_dir: Path, *extra: str) -> list[str]:
+    return ["replay-server", "--set", f"transport.router={endpoint}", "--set", f"train.run_dir={run_dir}",
+            "--set", "transport.run_id=waits", "--set", "replay.demo_mode=none", "--set", "replay.http_port=-1",
+            *extra]
+
+
+@pytest.mark.parametrize("command", ["replay-server", "learner"])
+def test_a_service_with_a_connect_timeout_gives_up_in_one_line_naming_its_router(tmp_path, command):
+    endpoint = f"tcp/127.0.0.1:{transport.free_tcp_port()}"
+    argv = (replay_server_argv(endpoint, tmp_path / "run") if command == "replay-server"
+            else learner_argv(endpoint, tmp_path / "run"))
+    proc = subprocess.run([sys.executable, "-m", "laneshift", *argv, "--set", "transport.connect_timeout_s=2"],
+                          cwd=ROOT, capture_output=True, text=True, timeout=90, stdin=subprocess.DEVNULL)
+    assert proc.returncode != 0, proc.stdout + proc.stderr
+    assert "Traceback" not in proc.stderr, proc.stderr
+    assert f"{command}: no zenoh router answered at {endpoint} within 2 s" in proc.stderr, proc.stderr
+
+
+def test_a_replay_server_stopped_while_waiting_for_its_router_exits_0_in_one_line(tmp_path):
+    endpoint = f"tcp/127.0.0.1:{transport.free_tcp_port()}"
+    seen: list[str] = []
+    server, out = start(replay_server_argv(endpoint, tmp_path / "run"))
+    try:
+        line = wait_line(out, seen, "replay-server: waiting for the zenoh router", 40)
+        assert line == f"replay-server: waiting for the zenoh router at {endpoint} (transport.router) ...", line
+        server.send_signal(signal.SIGTERM)
+        assert server.wait(10) == 0, "\n".join(seen)
+        line = wait_line(out, seen, "replay-server: stopped while waiting", 5)
+        assert line == f"replay-server: stopped while waiting for the zenoh router at {endpoint}"
+        assert not any("Traceback" in s for s in seen), "\n".join(seen)
+    finally:
+        terminate(server, 10)

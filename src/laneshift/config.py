@@ -281,6 +281,9 @@ class TransportConfig:
     # senders cannot balloon the router's or the replay server's memory). 0 = sized from the run
     # (RunConfig.max_message_bytes): twice its largest message (a sample reply), at least 16 MiB.
     max_message_mb: float = 0.0
+    # How long a process waits for its router before it gives up with one line naming it
+    # (0 = forever: services may start before the router, and WaitLines says what they wait for).
+    connect_timeout_s: float = 0.0
 
     def __post_init__(self) -> None:
         _check(self.router.startswith(("tcp/", "udp/", "unixsock-stream/")), "transport.router",
@@ -291,6 +294,8 @@ class TransportConfig:
         _check(self.timeout_s > 0, "transport.timeout_s", "must be > 0", self.timeout_s)
         _check(self.max_message_mb >= 0, "transport.max_message_mb", "must be >= 0 (0 = sized from the run)",
                self.max_message_mb)
+        _check(self.connect_timeout_s >= 0, "transport.connect_timeout_s", "must be >= 0 (0 = wait forever)",
+               self.connect_timeout_s)
 
 
 @dataclass(frozen=True)

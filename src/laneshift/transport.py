@@ -145,8 +145,7 @@ def open_session(cfg: TransportConfig, mode: str = "client", max_message_bytes: 
         max_message_bytes = int(cfg.max_message_mb * 2**20) if cfg.max_message_mb else DEFAULT_MAX_MESSAGE_BYTES
     quiet = connect_timeout_s is not None and who is None
     if connect_timeout_s is None:
-        # transport.connect_timeout_s, once config.py has it (0 or missing: wait forever).
-        connect_timeout_s = getattr(cfg, "connect_timeout_s", 0.0) or None
+        connect_timeout_s = cfg.connect_timeout_s or None  # transport.connect_timeout_s; 0 = wait forever
     conf = session_config(cfg.router, mode, max_message_bytes, connect_timeout_s)
     if mode != "client":
         return zenoh.open(conf)  # a router only binds its port: nothing to wait for
