@@ -1,6 +1,6 @@
 """`laneshift experiment replot`: a compare study's table and figures redrawn from its kept data,
 on a tiny synthetic results dir (no training): the across-seed table, the Table 2 bar chart, the
-curves against env steps and wall clock from the runs' metrics.jsonl, then again from the
+curves against env steps, episodes and wall clock and the periodic greedy evaluations from the runs' metrics.jsonl, then again from the
 episodes.json it keeps once the run dirs are gone; older logs without env steps; bad paths.
 May import: laneshift.experiments, laneshift.cli, numpy, pytest and the standard library.
 """
@@ -38,6 +38,10 @@ def _metrics(run_dir: Path, seed: int, episodes: int = 60, env_steps: bool = Tru
         if env_steps:
             rec["env_steps"] = steps
         lines.append(rec)
+        if env_steps and i % 20 == 19:  # a periodic greedy evaluation (train.eval_every)
+            lines.append({"kind": "eval", "step": steps, "time": t, "env_steps": steps, "episodes": 10,
+                          "survival_rate": 0.1 * (i // 20), "achievement_rate": 0.05 * (i // 20),
+                          "return_mean": float(i), "length_mean": 90.0, "eval_s": 1.0})
     (run_dir / "metrics.jsonl").write_text("\n".join(json.dumps(r) for r in lines) + "\n")
 
 
@@ -86,15 +90,17 @@ def test_replot_draws_the_figures_from_the_runs_then_from_the_kept_episodes(tmp_
     monkeypatch.setenv("LANESHIFT_PROGRESS", "0")
     study = _study(tmp_path)
     assert cli.main(["experiment", "replot", "--results", str(study), "--window", "10"]) == 0
-    for name in ("table2.png", "curves_env_steps.png", "curves_wallclock.png"):
+    for name in ("table2.png", "curves_env_steps.png", "curves_episodes.png", "curves_wallclock.png",
+                 "curves_eval.png"):
         assert (study / name).read_bytes()[:4] == PNG, name
-    assert not (study / "curves_episodes.png").exists()  # the runs have env steps
     assert "| rehearsal | non-target | 2 |" in (study / "table.md").read_text()
     kept = json.loads((study / EPISODES_FILE).read_text())["runs"]
     assert set(kept) == {"none-s0", "none-s1", "rehearsal-s0", "rehearsal-s1"}
     first = kept["none-s0"]
     assert len(first["return"]) == len(first["env_steps"]) == len(first["time_s"]) == 60
     assert first["env_steps"] == sorted(first["env_steps"]) and first["time_s"][0] > 0  # since the run's start
+    assert [e["survival_rate"] for e in first["evals"]] == pytest.approx([0.0, 0.1, 0.2])
+    assert [e["env_steps"] for e in first["evals"]] == [first["env_steps"][i] for i in (19, 39, 59)]
     assert "wrote" in capsys.readouterr().out
     # The run dirs gone (as in docs/results): the curves come from episodes.json, which stays as it was.
     for run_dir in (tmp_path / "runs").iterdir():
@@ -104,6 +110,7 @@ def test_replot_draws_the_figures_from_the_runs_then_from_the_kept_episodes(tmp_
     out = tmp_path / "elsewhere"
     assert cli.main(["experiment", "replot", "--results", str(study), "--out", str(out)]) == 0
     assert (out / "curves_env_steps.png").read_bytes()[:4] == PNG and (out / "table2.png").exists()
+    assert (out / "curves_eval.png").read_bytes()[:4] == PNG  # the evaluations kept in episodes.json
     assert (study / EPISODES_FILE).read_text() == before and not (out / EPISODES_FILE).exists()
 
 
@@ -113,6 +120,7 @@ def test_replot_without_env_steps_draws_against_episodes(tmp_path, monkeypatch):
     assert cli.main(["experiment", "replot", "--results", str(study), "--window", "10"]) == 0
     assert (study / "curves_episodes.png").read_bytes()[:4] == PNG
     assert (study / "curves_wallclock.png").exists() and not (study / "curves_env_steps.png").exists()
+    assert not (study / "curves_eval.png").exists()  # these runs had no periodic evaluation
 
 
 def test_replot_without_episode_data_leaves_the_curves_alone(tmp_path, capsys, monkeypatch):

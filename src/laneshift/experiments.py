@@ -17,9 +17,10 @@ demo-only pre-training phase, then retention, with DQfD's large-margin loss on d
 10-step returns), ``dqfd-bc`` (``dqfd`` plus a cross-entropy imitation loss on demo rows and a
 dueling head). Writes ``results.json``, ``table.md``, ``table2.png`` (bars with across-seed
 intervals), ``episodes.json`` (every run's per-episode data, so the curves can be redrawn once the
-run dirs are gone) and ``curves_env_steps.png`` / ``curves_wallclock.png`` (moving-average return
-and episode length, mean over seeds with a 95 % bootstrap band; ``curves_episodes.png`` instead of
-the env-step figure for logs without env steps). ``replot`` redraws the table and figures of a
+run dirs are gone), ``curves_env_steps.png`` / ``curves_episodes.png`` / ``curves_wallclock.png``
+(moving-average return and episode length, mean over seeds with a 95 % bootstrap band; no env-step
+figure for logs without env steps) and, for runs with ``train.eval_every``, ``curves_eval.png``
+(greedy survival and achievement during training). ``replot`` redraws the table and figures of a
 study from its ``results.json`` and ``episodes.json`` (or the runs' ``metrics.jsonl``).
 """
 
@@ -367,7 +368,7 @@ def run_episodes(run_dir: str | Path) -> dict | None:
     path = Path(run_dir) / "metrics.jsonl"
     if not path.is_file():
         return None
-    t0, t, steps, ret, length = None, [], [], [], []
+    t0, t, steps, ret, length, evals = None, [], [], [], [], []
     with open(path) as f:
         for line in f:
             try:
@@ -380,7 +381,14 @@ def run_episodes(run_dir: str | Path) -> dict | None:
                 steps.append(rec.get("env_steps"))
                 ret.append(rec["return"])
                 length.append(rec["length"])
-    return {"time_s": t, "env_steps": None if None in steps else steps, "return": ret, "length": length}
+            elif rec.get("kind") == "eval" and rec.get("env_steps") is not None:  # train.eval_every
+                evals.append({k: rec[k] for k in EVAL_FIELDS})
+    return {"time_s": t, "env_steps": None if None in steps else steps, "return": ret, "length": length,
+            "evals": evals}
+
+
+#: What a periodic greedy evaluation (``train.eval_every``) keeps in ``episodes.json``.
+EVAL_FIELDS = ("env_steps", "episodes", "survival_rate", "achievement_rate", "return_mean", "length_mean")
 
 
 def collect_episodes(results: dict, results_dir: Path) -> tuple[dict[str, dict], bool]:
@@ -408,7 +416,8 @@ def collect_episodes(results: dict, results_dir: Path) -> tuple[dict[str, dict],
 def write_episodes(episodes: dict[str, dict], out_dir: Path) -> Path:
     """``episodes.json``: the runs' per-episode data, rounded (ms, 1e-3 return) to stay small."""
     runs = {key: {"time_s": [round(x, 3) for x in e["time_s"]], "env_steps": e["env_steps"],
-                  "return": [round(x, 3) for x in e["return"]], "length": e["length"]}
+                  "return": [round(x, 3) for x in e["return"]], "length": e["length"],
+                  "evals": e.get("evals", [])}
             for key, e in episodes.items()}
     out = out_dir / EPISODES_FILE
     out.write_text(json.dumps({"note": "per-episode training data of each run (<method>-s<seed>), from its "
@@ -438,7 +447,9 @@ def plot_curves(results: dict, out_dir: Path, window: int = 100, episodes: dict[
     if not per_method:
         return []
     with_steps = all(e["env_steps"] is not None for runs in per_method.values() for e in runs)
-    axes = {"env_steps" if with_steps else "episodes": "env steps" if with_steps else "episodes",
+    # Episodes as in the paper's figures 4 and 5; env steps, the budget every method shares (an
+    # episode lasts longer the better the policy); wall clock, what a user waits.
+    axes = {**({"env_steps": "env steps"} if with_steps else {}), "episodes": "episodes",
             "wallclock": "wall-clock seconds (from the run's start)"}
     written = []
     for axis, xlabel in axes.items():
@@ -472,7 +483,52 @@ def plot_curves(results: dict, out_dir: Path, window: int = 100, episodes: dict[
         fig.savefig(path, dpi=100)
         plt.close(fig)
         written.append(path)
-    return written
+    eval_plot = plot_eval_curves(results, out_dir, episodes)
+    return written + ([eval_plot] if eval_plot else [])
+
+
+def plot_eval_curves(results: dict, out_dir: Path, episodes: dict[str, dict]) -> Path | None:
+    """``curves_eval.png``: the periodic greedy evaluations (``train.eval_every``) of each method,
+    survival and achievement rate against env steps, mean over seeds with a 95 % bootstrap band over
+    seeds. This, not the training return (which mixes in exploration), says whether the greedy
+    policy has stopped improving. None when no run has two evaluations."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    per_method = {m: [evals for run in r["runs"]
+                      if len(evals := episodes.get(f"{m}-s{run['seed']}", {}).get("evals") or []) >= 2]
+                  for m, r in results["methods"].items()}
+    per_method = {m: runs for m, runs in per_method.items() if runs}
+    if not per_method:
+        return None
+    fig, axes = plt.subplots(2, 1, figsize=(8, 7), sharex=True)
+    for method, runs in per_method.items():
+        color = f"C{list(results['methods']).index(method)}"
+        for ax, field in zip(axes, ("survival_rate", "achievement_rate")):
+            c = curves_on_grid([np.asarray([e["env_steps"] for e in ev], dtype=float) for ev in runs],
+                               [np.asarray([100.0 * e[field] for e in ev]) for ev in runs])
+            if len(c["x"]) == 0:
+                continue
+            ax.plot(c["x"], c["mean"], color=color, lw=1.5,
+                    label=f"{method} ({len(runs)} seed{'s' if len(runs) > 1 else ''})" if field == "survival_rate" else None)
+            ax.fill_between(c["x"], c["lo"], c["hi"], color=color, alpha=0.2, lw=0)
+    n = sorted({e["episodes"] for runs in per_method.values() for ev in runs for e in ev})
+    axes[0].set_ylabel("greedy survival (%)")
+    axes[1].set_ylabel("greedy achievement (%)")
+    axes[1].set_xlabel("env steps")
+    axes[0].legend()
+    for ax in axes:
+        ax.set_ylim(-2, 102)
+        ax.grid(alpha=0.3)
+    fig.suptitle(f"{results['scenario']}: greedy evaluation during training ({'/'.join(map(str, n))} episodes "
+                 f"each, the same episode seeds every time), mean over seeds, 95 % bootstrap band over seeds", fontsize=10)
+    fig.tight_layout()
+    path = out_dir / "curves_eval.png"
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
 
 
 def run_replot(args: argparse.Namespace) -> int:
