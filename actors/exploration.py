@@ -8,6 +8,9 @@
     >>> s = make_schedule(ActorConfig(epsilon_decay_steps=100), worker_index=0)
     >>> s(0), round(s(50), 2), s(1000)
     (1.0, 0.55, 0.1)
+
+Room: actors, the env-running component. May import: the contract and laneshift.actors; never
+another component.
 """
 
 from __future__ import annotations

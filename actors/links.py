@@ -2,6 +2,9 @@
 
     >>> links = ZenohActorLinks(session, "run", "w0")  # doctest: +SKIP
     >>> worker.run(links, env_steps=10_000)  # doctest: +SKIP
+
+Room: actors, the env-running component. May import: the contract and laneshift.actors; never
+another component.
 """
 
 from __future__ import annotations
@@ -44,7 +47,8 @@ class ZenohActorLinks:
             name, f"the replay server on {wire.replay_control_key(run_id)} (router {router})",
             f"the replay server answered on {wire.replay_control_key(run_id)}")
 
-    def send_transitions(self, payload: bytes) -> None:
+    def send_transitions(self, batch: wire.TransitionBatch) -> None:
+        payload = wire.encode_transitions(batch)
         if not self._transitions.matching_status.matching:
             # Nobody subscribed as far as this session knows (the first batch, or the router or
             # replay server is coming back): a put now would go nowhere, so wait for the match
@@ -89,8 +93,8 @@ class ZenohActorLinks:
             time.sleep(0.05)
             stored = self._stored_next_seq()
 
-    def send_episode(self, payload: bytes) -> None:
-        self._episodes.put(payload)
+    def send_episode(self, record: wire.EpisodeRecord) -> None:
+        self._episodes.put(wire.encode_episode(record))
 
     def latest_weights(self) -> bytes | None:
         return self._weights.take()

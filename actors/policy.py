@@ -4,10 +4,10 @@ For vector observations the MLP runs in numpy: an env worker then never imports 
 180 MB of RSS per worker process, measured with `laneshift bench run`), and a forward pass of a
 few rows is faster than torch's per-call overhead. It reads the learner's weights by their
 state-dict names (``net.0.weight``, ..., a dueling head's ``value`` / ``advantage``) and computes
-exactly what ``learner.networks.MLPQNetwork`` computes, in float32. Image observations use the
+exactly what ``laneshift.qnet.MLPQNetwork`` computes, in float32. Image observations use the
 torch network (the Nature CNN), imported only then.
 May import: the contract (``laneshift.wire``), numpy, threadpoolctl; torch and
-``laneshift.learner.networks`` only for image observations.
+``laneshift.qnet`` only for image observations.
 
     >>> import numpy as np
     >>> p = QPolicy((4,), 3, hidden=(8,), seed=0)
@@ -42,7 +42,7 @@ class NumpyMLP:
         self.load({k: np.zeros(s, np.float32) for k, s in self.shapes.items()})
 
     def load(self, tensors: dict[str, np.ndarray]) -> None:
-        """Strict, like ``learner.weights.load_into``: the same names and shapes, or ValueError."""
+        """Strict, like ``laneshift.qnet.load_into``: the same names and shapes, or ValueError."""
         if set(tensors) != set(self.shapes):
             raise ValueError(f"weights keys {sorted(tensors)} do not match the network {sorted(self.shapes)}")
         for k, v in tensors.items():
@@ -74,14 +74,14 @@ class _TorchNet:
                  threads: int, cnn: str = "nature"):
         import torch
 
-        from laneshift.learner.networks import build_q_network
+        from laneshift.qnet import build_q_network
 
         torch.set_num_threads(threads)
         self.torch = torch
         self.net = build_q_network(obs_shape, n_actions, hidden, dueling, cnn).eval()
 
     def load(self, tensors: dict[str, np.ndarray]) -> None:
-        from laneshift.learner.weights import load_into
+        from laneshift.qnet import load_into
 
         load_into(self.net, tensors)
 

@@ -1,19 +1,24 @@
 """An env worker: runs env copies, acts epsilon-greedily with its latest weights, sends batches.
 
 The worker only knows three tiny seams (Acme style), so the same class runs inside a Ray actor
-over zenoh (``ZenohActorLinks``) and in-process in unit tests (``laneshift.deploy.inprocess``):
+over zenoh (``ZenohActorLinks``) and in-process in unit tests (``laneshift.deploy.inprocess``);
+the links own the encoding:
 
-- ``links.send_transitions(bytes)`` and ``links.send_episode(bytes)``;
-- ``links.latest_weights() -> bytes | None`` (newest unseen version, never blocks) and
-  ``links.wait_weights(timeout) -> bytes | None``;
-- ``links.wait_insert_ok()`` (blocks while the replay's rate limiter says the learner is behind);
-- ``links.stop_requested() -> bool``.
+- ``ExperienceSink``: ``send_transitions(TransitionBatch)`` and ``send_episode(EpisodeRecord)``;
+- ``WeightsSource`` (Acme's VariableSource): ``latest_weights() -> bytes | None`` (newest unseen
+  version, never blocks) and ``wait_weights(timeout) -> bytes | None``. They stay the wire's
+  safetensors bytes because the worker itself verifies them and counts the ones it refuses;
+- ``RunControl``: ``wait_insert_ok()`` (blocks while the replay's rate limiter says the learner is
+  behind) and ``stop_requested() -> bool``.
 
 Every ``send_every`` env steps it publishes one transitions batch (MATLAB: "workers send their
 experience every N steps"). With ``n_step > 1`` the batch holds n-step items (laneshift.nstep),
 each sent once its n rewards are known, so a batch can hold up to n - 1 items fewer or more. In
 ``sync`` mode it then waits for the next weights version, so no step is ever taken with stale
 weights; in ``async`` mode it takes the newest version if one came.
+
+Room: actors, the env-running component. May import: the contract and laneshift.actors; never
+another component.
 """
 
 from __future__ import annotations
@@ -27,20 +32,36 @@ import numpy as np
 
 from laneshift import wire
 from laneshift.config import ActorConfig, EnvConfig
-from laneshift.envspec import make_env
 from laneshift.nstep import NStepAccumulator, NStepItem, check_nstep
 
+from .envs import make as make_env
 from .exploration import make_schedule
 from .policy import QPolicy
 
 
-class ActorLinks(Protocol):
-    def send_transitions(self, payload: bytes) -> None: ...
-    def send_episode(self, payload: bytes) -> None: ...
+class ExperienceSink(Protocol):
+    """Where experience goes: the replay server (transitions) and the learner (episode records)."""
+
+    def send_transitions(self, batch: wire.TransitionBatch) -> None: ...
+    def send_episode(self, record: wire.EpisodeRecord) -> None: ...
+
+
+class WeightsSource(Protocol):
+    """The learner's newest weights (wire bytes, verified by the worker)."""
+
     def latest_weights(self) -> bytes | None: ...
     def wait_weights(self, timeout: float) -> bytes | None: ...
+
+
+class RunControl(Protocol):
+    """The run's flow control (the replay's rate limiter) and its stop."""
+
     def wait_insert_ok(self) -> None: ...
     def stop_requested(self) -> bool: ...
+
+
+class ActorLinks(ExperienceSink, WeightsSource, RunControl, Protocol):
+    """All three seams, as one object (what the builder hands a worker)."""
 
 
 @dataclass
@@ -179,12 +200,10 @@ class EnvWorker:
                     ep_len[j] += 1
                     if terminated or truncated:
                         episodes += 1
-                        links.send_episode(wire.encode_json({
-                            "actor": self.name, "return": float(ep_return[j]), "length": int(ep_len[j]),
-                            "crashed": bool(info.get("crashed", False)),
-                            "on_target_lane": bool(info.get("on_target_lane", False)),
-                            "weights_version": self.policy.version, "phase": self.policy.phase,
-                            "env_steps": steps + j + 1, "epsilon": float(eps)}))
+                        links.send_episode(wire.EpisodeRecord(
+                            self.name, float(ep_return[j]), int(ep_len[j]), bool(info.get("crashed", False)),
+                            bool(info.get("on_target_lane", False)), self.policy.version, self.policy.phase,
+                            env_steps=steps + j + 1, epsilon=float(eps)))
                         ep_return[j], ep_len[j] = 0.0, 0
                         next_obs, _ = env.reset()
                     obs[j] = next_obs
@@ -203,7 +222,7 @@ class EnvWorker:
                 terminated=[it.terminated for it in items], truncated=[it.truncated for it in items],
                 steps=[it.steps for it in items])
             items = []
-            links.send_transitions(wire.encode_transitions(batch))
+            links.send_transitions(batch)
             versions.append(self.policy.version)
             seq += 1
             if self.sync and steps < env_steps:

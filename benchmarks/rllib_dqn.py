@@ -14,7 +14,7 @@ docs/rllib-peer.md says what is matched and what is not.
 
 What it may import: the standard library, ray/RLlib, torch, gymnasium, and of laneshift ONLY its
 env code (``laneshift.actors.envs``: gymnasium + highway-env + pygame-ce, no zenoh, no replay
-server, no learner) and ``laneshift.deploy.bench_run``'s process-tree sampler (no zenoh or torch at
+server, no learner) and ``laneshift.bench.run``'s process-tree sampler (no zenoh or torch at
 import), so both systems' memory is measured by the same code. RLlib 2.60 pins gymnasium 1.2.2 while laneshift pins 1.4.0, so it runs in
 its own venv, ``.venv-rllib`` (laneshift installed there with ``--no-deps -e .``).
 
@@ -57,7 +57,7 @@ def _tree_sampler(root: int):
     """``laneshift bench run``'s sampler, its processes named for an RLlib run."""
     import functools
 
-    from laneshift.deploy.bench_run import TreeSampler, process_label
+    from laneshift.bench.run import TreeSampler, process_label
 
     return TreeSampler(root, label=functools.partial(process_label, root_label="driver (algorithm + local learner)",
                                                      actors=(("SingleAgentEnvRunner", "env-runner"),)))

@@ -27,21 +27,18 @@ from typing import Any
 import ray
 
 from laneshift.config import RunConfig, load_run_config
+from laneshift.envspec import EnvSpec, spec_from_dict
 
 from .builder import Builder
 
 
-def _config(plain: dict) -> RunConfig:
-    """The run config from its plain form, plus the env spec the launcher computed, if it sent one
+def _config(plain: dict) -> tuple[RunConfig, EnvSpec | None]:
+    """The run config from its plain form, and the env spec the launcher computed, if it sent one
     (then this process builds no simulator just to learn the observation's shape)."""
     plain = dict(plain)
     spec = plain.pop("env_spec", None)
     cfg = load_run_config(overrides={f"{s}.{k}": v for s, body in plain.items() for k, v in body.items()})
-    if spec is not None:
-        from laneshift.envspec import remember
-
-        remember(cfg.env, spec)
-    return cfg
+    return cfg, (spec_from_dict(spec, cfg.env) if spec is not None else None)
 
 
 def _log_to_run_dir(cfg: RunConfig, component: str) -> None:
@@ -113,7 +110,7 @@ class _Service:
     component = ""
 
     def _begin(self, plain: dict) -> RunConfig:
-        cfg = _config(plain)
+        cfg, self.spec = _config(plain)
         _log_to_run_dir(cfg, self.component)
         _write_pid(cfg, self.component)
         self.stop_event = threading.Event()
@@ -139,7 +136,7 @@ class RouterActor(_Service):
         # Listen on the address of the node this actor landed on (never the driver's), or on
         # deploy.advertise_host. A restart runs this again with the same port: clients reconnect.
         self.endpoint = f"tcp/{host or self.where['node_ip']}:{port}"
-        self.router = Builder(cfg).router(self.endpoint).start()
+        self.router = Builder(cfg, self.spec).router(self.endpoint).start()
 
     def info(self) -> dict[str, Any]:
         return {**self.where, "endpoint": self.endpoint}
@@ -156,7 +153,7 @@ class ReplayServerActor(_Service):
     def __init__(self, plain: dict):
         cfg = self._begin(plain)
         self.cfg = cfg
-        self.server = Builder(cfg).replay_server()
+        self.server = Builder(cfg, self.spec).replay_server()
         self.started = self.server.start()  # restores its checkpoint after a crash
         self.final: dict | None = None
 
@@ -194,7 +191,7 @@ class LearnerActor(_Service):
 
         cfg = self._begin(plain)
         torch.set_num_threads(cfg.learner.torch_threads)
-        builder = Builder(cfg)
+        builder = Builder(cfg, self.spec)
         self.session = transport.open_session(cfg.transport, max_message_bytes=cfg.max_message_bytes, who="learner")
         self.learner = builder.learner(builder.learner_links(self.session, self.stop_event), self.stop_event)
 
@@ -223,8 +220,8 @@ class EnvWorkerActor:
     def __init__(self, plain: dict, index: int):
         from laneshift import transport
 
-        cfg = _config(plain)
-        builder = Builder(cfg)
+        cfg, spec = _config(plain)
+        builder = Builder(cfg, spec)
         self.cfg, self.name = cfg, builder.workers[index]
         _log_to_run_dir(cfg, self.name)
         _write_pid(cfg, self.name)

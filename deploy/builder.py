@@ -8,8 +8,9 @@ the in-process test mode all build through it and differ only in *where* each co
     in-process (deploy.inprocess)   threads of one process, in-memory links
     local / cluster (deploy.launch) one Ray actor each (deploy.actors), zenoh links
 
-May import: the contract (``laneshift.config``, ``wire``, ``envspec``, ``transport``) and the
-components it builds (that is its job); nothing imports it but ``deploy``.
+Room: deploy. May import: the contract (``laneshift.config``, ``wire``, ``envspec``,
+``transport``) and the components it builds (that is its job); nothing imports it but ``deploy``
+and the commands that start one component (``laneshift.cli``).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from laneshift.config import RunConfig, worker_budgets, worker_names
-from laneshift.envspec import EnvSpec, env_spec
+from laneshift.envspec import EnvSpec
 
 #: The run's services, in start order (each one's clients need the ones before it).
 SERVICES = ("router", "replay-server", "learner")
@@ -51,15 +52,17 @@ class Placement:
 class Builder:
     """Builds the components of one run. Cheap to make: nothing is built until asked for."""
 
-    def __init__(self, cfg: RunConfig):
+    def __init__(self, cfg: RunConfig, spec: EnvSpec | None = None):
         self.cfg = cfg
-        self._spec: EnvSpec | None = None
+        self._spec = spec  # as computed by the launcher and shipped here; None: computed on first use
 
     @property
     def spec(self) -> EnvSpec:
-        """The env's observation and action spec, computed once."""
+        """The env's observation and action spec, computed once (by building the env) unless given."""
         if self._spec is None:
-            self._spec = env_spec(self.cfg.env)
+            from laneshift.actors.envs import spec_of
+
+            self._spec = spec_of(self.cfg.env)
         return self._spec
 
     @property
@@ -81,18 +84,29 @@ class Builder:
         """The replay tables and rules alone (the in-process mode drives it directly)."""
         from laneshift.replay_server.service import build_core
 
-        return build_core(self.cfg)
+        return build_core(self.cfg, self.spec)
 
     def replay_server(self):
         """Core + zenoh service + HTTP API, as one server with start()/stop()."""
         from laneshift.replay_server.service import ReplayServer
 
-        return ReplayServer(self.cfg)
+        return ReplayServer(self.cfg, self.spec)
 
     def learner(self, links, stop: threading.Event):
         from laneshift.learner.loop import Learner
 
-        return Learner(self.cfg, self.spec, links, stop)
+        return Learner(self.cfg, self.spec, links, stop, self.greedy_evaluation())
+
+    def greedy_evaluation(self):
+        """The learner's ``EvaluatePolicy`` for ``train.eval_every`` (None when off): the run's env,
+        ``train.periodic_eval_episodes`` episodes on the final summary's episode seeds."""
+        t = self.cfg.train
+        if not t.eval_every:
+            return None
+        from laneshift.actors.evaluation import evaluate_policy
+
+        env_cfg, episodes, seed = self.cfg.env, t.periodic_eval_episodes, t.seed + 12345
+        return lambda greedy: evaluate_policy(lambda env: greedy, env_cfg, episodes, seed=seed)
 
     def learner_links(self, session, stop: threading.Event):
         from laneshift.learner.links import ZenohLearnerLinks

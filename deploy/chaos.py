@@ -346,7 +346,7 @@ class StatsFlood(threading.Thread):
         import numpy as np
 
         from laneshift import transport, wire
-        from laneshift.envspec import env_spec
+        from laneshift.actors.envs import spec_of as env_spec
 
         deadline = time.monotonic() + self.timeout_s
         if not _wait_until(_reached(self.run_dir, self.at_steps), deadline, self._halt):

@@ -42,11 +42,11 @@ class InProcessActorLinks:
         self.board, self.name = board, name
         self._seen = b""
 
-    def send_transitions(self, payload: bytes) -> None:
-        self.board.core.ingest(payload, self.name)
+    def send_transitions(self, batch: wire.TransitionBatch) -> None:
+        self.board.core.ingest(wire.encode_transitions(batch), self.name)  # the wire's bytes, as over zenoh
 
-    def send_episode(self, payload: bytes) -> None:
-        self.board.episodes.append(payload)
+    def send_episode(self, record: wire.EpisodeRecord) -> None:
+        self.board.episodes.append(wire.encode_episode(record))
 
     def latest_weights(self) -> bytes | None:
         with self.board.cond:

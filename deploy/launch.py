@@ -132,7 +132,7 @@ def prepare_run_dir(run_dir: Path, resume: bool, overwrite: bool, out: TextIO) -
 def _default_demo_episodes(cfg: RunConfig) -> int:
     """Scripted episodes for the default shard: ``train.demo_episodes``, else enough for
     retention's demo region (or 2,000 transitions for rehearsal), at least 20."""
-    from laneshift.envspec import make_env
+    from laneshift.actors.envs import make as make_env
 
     if cfg.train.demo_episodes:
         return cfg.train.demo_episodes
@@ -148,7 +148,7 @@ def default_demo_dir(cfg: RunConfig, episodes: int) -> Path:
     are in the name, so a run that needs more demos, or a newer driver's, gets a new shard instead
     of a refusal or stale demos)."""
     from laneshift.actors.envs.demonstrator import ScriptedDriver
-    from laneshift.envspec import env_spec
+    from laneshift.actors.envs import spec_of as env_spec
 
     env = cfg.env
     # The observation's shape is in the name: a layout change makes a new shard, not a refusal.
@@ -638,7 +638,7 @@ def _summary(run: Run, why: str, wall: float, out: TextIO) -> dict:
                                "lost_batches": lost_batches, "lost_items": lost_items,
                                "rejected": replay.get("rejected")}}
     if cfg.train.eval_episodes and final.exists() and why in ("done", "stopped"):
-        from laneshift.evaluate import evaluate_checkpoint, format_result
+        from laneshift.actors.evaluation import evaluate_checkpoint, format_result
 
         result["eval"] = evaluate_checkpoint(final, cfg.env, episodes=cfg.train.eval_episodes,
                                              seed=cfg.train.seed + 12345)
@@ -670,7 +670,8 @@ class _SpecThread(threading.Thread):
         self.start()
 
     def run(self) -> None:
-        from laneshift.envspec import env_spec, spec_to_dict
+        from laneshift.actors.envs import spec_of as env_spec
+        from laneshift.envspec import spec_to_dict
 
         try:
             self._spec = spec_to_dict(env_spec(self.env))

@@ -3,6 +3,9 @@
     >>> group = ProcessGroup(Path("runs/x/logs"))  # doctest: +SKIP
     >>> group.start("router", [sys.executable, "-m", "laneshift", "router", "--listen", ep])  # doctest: +SKIP
     >>> group.stop_all()  # SIGTERM, then SIGKILL after a grace period  # doctest: +SKIP
+
+Room: deploy, the wiring. May import: the contract, the components and the demo tools; never the
+studies, the benchmarks or the CLI.
 """
 
 from __future__ import annotations

@@ -23,6 +23,8 @@ The update is written to cost what a bare torch loop costs (``laneshift bench le
   multi-tensor (``foreach``) one;
 - the online network's pass over ``next_obs`` (Double DQN's chooser) is a separate no-grad pass on
   CPU and one pass over ``cat(obs, next_obs)`` on CUDA, see ``concat_online_pass``.
+
+Room: learner (component). May import: the contract and laneshift.learner; never another component.
 """
 
 from __future__ import annotations
@@ -37,7 +39,7 @@ import torch.nn.functional as F
 
 from laneshift.config import LearnerConfig
 
-from .networks import build_q_network
+from laneshift.qnet import build_q_network
 
 #: The metrics every update returns, in this order.
 METRIC_NAMES = ("loss", "q_mean", "grad_norm", "td_abs", "margin_loss", "bc_loss")

@@ -1,8 +1,12 @@
 """The learner's seams (Acme style): the same Learner runs over zenoh or in-process.
 
-- ``sample(SampleRequest)`` -> SampledBatch, a WireError (not ready / rate limited) or None;
-- ``replay_stats()`` / ``replay_control(body)``: the replay server's stats and commands;
-- ``publish_weights(bytes)`` / ``publish_stats(bytes)`` / ``send_priorities(bytes)``; ``take_episodes()``; ``stop_requested()``.
+- ``ReplayClient``: ``sample(SampleRequest)`` -> SampledBatch, a WireError (not ready / rate
+  limited) or None; ``send_priorities(bytes)``; ``replay_stats()`` / ``replay_control(body)``;
+- ``WeightsPublisher``: ``publish_weights(bytes)`` (safetensors with a version, ``laneshift.qnet``);
+- ``RunChannel``: ``take_episodes()`` (the workers' episode records, as sent: the learner
+  validates and counts them), ``publish_stats(bytes)``, ``stop_requested()``, ``stop_all()``.
+
+Room: learner (component). May import: the contract and laneshift.learner; never another component.
 """
 
 from __future__ import annotations
@@ -19,18 +23,32 @@ from laneshift.config import RunConfig
 T = TypeVar("T")
 
 
-class LearnerLinks(Protocol):
-    """The learner's seams: the replay server, the weights broadcast, episode records, control."""
+class ReplayClient(Protocol):
+    """The replay server, as the learner uses it."""
 
     def sample(self, req: wire.SampleRequest) -> wire.SampledBatch | wire.WireError | None: ...
+    def send_priorities(self, payload: bytes) -> None: ...
     def replay_stats(self) -> dict | None: ...
     def replay_control(self, body: dict) -> dict | None: ...
+
+
+class WeightsPublisher(Protocol):
+    """The weights broadcast to the env workers."""
+
     def publish_weights(self, payload: bytes) -> None: ...
-    def send_priorities(self, payload: bytes) -> None: ...
-    def publish_stats(self, payload: bytes) -> None: ...
+
+
+class RunChannel(Protocol):
+    """Episode records in, the learner's stats out, and the run's stop."""
+
     def take_episodes(self) -> list[bytes]: ...
+    def publish_stats(self, payload: bytes) -> None: ...
     def stop_requested(self) -> bool: ...
     def stop_all(self) -> None: ...
+
+
+class LearnerLinks(ReplayClient, WeightsPublisher, RunChannel, Protocol):
+    """All three seams, as one object (what the builder hands the learner)."""
 
 
 class ZenohLearnerLinks:

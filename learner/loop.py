@@ -21,6 +21,8 @@ replay server's count, the workers' episode reports and the count restored with 
 so TensorBoard's step never goes back, on a restart or ``--resume`` either.
 
 Run it with ``laneshift learner --config run.yaml``.
+
+Room: learner (component). May import: the contract and laneshift.learner; never another component.
 """
 
 from __future__ import annotations
@@ -38,12 +40,12 @@ import torch
 
 from laneshift import transport, wire
 from laneshift.config import RunConfig, worker_budgets, worker_names  # noqa: F401 - re-exported
-from laneshift.envspec import EnvSpec, env_spec
+from laneshift.envspec import EnvSpec
+from laneshift.qnet import save_checkpoint, to_wire
 
 from .dqn import METRIC_NAMES, DoubleDQN
 from .links import LearnerLinks, ZenohLearnerLinks
-from .metrics import GreedyEval, MetricsLog
-from .weights import save_checkpoint, to_wire
+from .metrics import EvaluatePolicy, GreedyEval, MetricsLog
 
 
 #: How long the end of a run waits for a running greedy evaluation (train.eval_every) before cancelling it.
@@ -51,7 +53,11 @@ FINAL_EVAL_WAIT_S = 10.0
 
 
 class Learner:
-    def __init__(self, cfg: RunConfig, spec: EnvSpec, links: LearnerLinks, stop: threading.Event):
+    """The learner's loop: batches from ``links``, Double DQN updates, weights back to ``links``.
+    ``evaluate`` (from the builder) plays the greedy policy for ``train.eval_every``; None: off."""
+
+    def __init__(self, cfg: RunConfig, spec: EnvSpec, links: LearnerLinks, stop: threading.Event,
+                 evaluate: EvaluatePolicy | None = None):
         self.cfg, self.lcfg, self.spec = cfg, cfg.learner, spec
         self.links, self.stop = links, stop
         self.run_dir = Path(cfg.train.run_dir)
@@ -67,15 +73,16 @@ class Learner:
         self.crashes: collections.deque[float] = collections.deque(maxlen=100)
         self.achieved: collections.deque[float] = collections.deque(maxlen=100)
         self.episodes = 0
+        self.bad_episode_records = 0  # episode records that failed wire.decode_episode
         self.actor_steps: dict[str, int] = {}
         self.actor_epsilon: dict[str, float] = {}  # each worker's epsilon at its newest episode
         # TensorBoard's step: the run's env steps, never decreasing (restored with the learner state).
         self.env_steps = 0
         t = cfg.train
         # The same episode seeds as the final summary's evaluation (deploy/launch.py: train.seed + 12345).
-        self.evaluator = GreedyEval(cfg.env, t.eval_every, t.periodic_eval_episodes, t.seed + 12345,
-                                    spec.schema.obs_shape, spec.schema.n_actions, cfg.learner.hidden,
-                                    cfg.learner.dueling, cfg.learner.cnn) if t.eval_every else None
+        self.evaluator = GreedyEval(evaluate, t.eval_every, spec.schema.obs_shape, spec.schema.n_actions,
+                                    cfg.learner.hidden, cfg.learner.dueling,
+                                    cfg.learner.cnn) if t.eval_every and evaluate is not None else None
         self.last_eval: dict | None = None
         self.last_update: Mapping[str, float] = {}  # the last update's metrics (dqn.UpdateMetrics: read lazily)
         self.replay_stats: dict = {}
@@ -313,10 +320,14 @@ class Learner:
     def _drain_episodes(self) -> None:
         for payload in self.links.take_episodes():
             try:
-                ep = wire.decode_json(payload)
-                ret, length = float(ep["return"]), int(ep["length"])
-            except (wire.WireError, KeyError, TypeError, ValueError):
+                ep = wire.decode_episode(payload)
+            except wire.WireError as exc:  # counted and said once: never a silent loss
+                self.bad_episode_records += 1
+                if self.bad_episode_records == 1:
+                    print(f"learner: skipped an unreadable episode record ({exc}); "
+                          f"the count is bad_episode_records in the status", flush=True)
                 continue
+            ret, length = ep.return_, ep.length
             self.episodes += 1
             if ret >= self.cfg.train.stop_return and self.stop_reason is None:
                 # MATLAB's stop criterion: an episode reached the target return.
@@ -326,20 +337,20 @@ class Learner:
                 print(f"learner: episode {self.episodes} returned {ret:.3f} >= train.stop_return "
                       f"{self.cfg.train.stop_return}: stopping the run", flush=True)
                 self.links.stop_all()
-            actor = str(ep.get("actor"))
-            crashed = float(bool(ep.get("crashed", False)))
-            on_target = float(bool(ep.get("on_target_lane", False)))
+            actor = ep.actor
+            crashed = float(ep.crashed)
+            on_target = float(ep.on_target_lane)
             self.returns.append(ret)
             self.lengths.append(length)
             self.crashes.append(crashed)
             self.achieved.append(on_target * (1.0 - crashed))
             # A worker's count only grows (a restarted worker resumes from what the replay server stored).
-            self.actor_steps[actor] = max(self.actor_steps.get(actor, 0), int(ep.get("env_steps", 0)))
-            self.actor_epsilon[actor] = float(ep.get("epsilon", 0.0))
+            self.actor_steps[actor] = max(self.actor_steps.get(actor, 0), ep.env_steps)
+            self.actor_epsilon[actor] = ep.epsilon
             step = self._note_env_steps()
             values = {"return": ret, "length": length, "crashed": crashed, "on_target_lane": on_target,
                       "epsilon": self.actor_epsilon[actor],
-                      "version_lag": float(self.version - int(ep.get("weights_version", 0)))}
+                      "version_lag": float(self.version - ep.weights_version)}
             self.metrics.write("episode", step, {**values, "episode": self.episodes, "actor": actor,
                                                  "env_steps": step},
                                {f"episode/{k}": v for k, v in values.items()})
@@ -361,8 +372,8 @@ class Learner:
         self._updates_at_last_log, self._steps_at_last_log, self._time_at_last_log = self.agent.updates, env_steps, now
         return {
             "updates": self.agent.updates, "updates_per_s": round(ups, 1), "version": self.version,
-            "phase": self.phase, "episodes": self.episodes, "env_steps": env_steps,
-            "env_steps_per_s": round(steps_per_s, 1),
+            "phase": self.phase, "episodes": self.episodes, "bad_episode_records": self.bad_episode_records,
+            "env_steps": env_steps, "env_steps_per_s": round(steps_per_s, 1),
             "return_mean": float(np.mean(self.returns)) if self.returns else None,
             "length_mean": float(np.mean(self.lengths)) if self.lengths else None,
             "crash_rate": float(np.mean(self.crashes)) if self.crashes else None,
@@ -485,8 +496,9 @@ def _split(batch: wire.SampledBatch) -> list[dict[str, np.ndarray]]:
     return [{k: v[i * rows:(i + 1) * rows] for k, v in fields.items()} for i in range(batch.num_batches)]
 
 
-def run_learner(cfg: RunConfig) -> int:
-    """Learner process entry point: runs until a stop command, SIGINT or SIGTERM."""
+def run_learner(cfg: RunConfig, spec: EnvSpec, evaluate: EvaluatePolicy | None = None) -> int:
+    """Learner process entry point: runs until a stop command, SIGINT or SIGTERM. ``spec``: the
+    env's, computed by whoever starts the process; ``evaluate``: for ``train.eval_every``."""
     # learner.torch_threads (default 1), a deliberate choice: the learner shares its node with the
     # replay server, the zenoh router and often actors, and a second intra-op thread would compete
     # with them for the same cores (on a 2-core node, for all of them) while the default MLP's
@@ -498,7 +510,6 @@ def run_learner(cfg: RunConfig) -> int:
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
-    spec = env_spec(cfg.env)
     try:
         # Waits for the router as long as it takes (it may start later; transport.connect_timeout_s
         # bounds it where the config has one), saying so in a line every 30 s.
@@ -512,5 +523,5 @@ def run_learner(cfg: RunConfig) -> int:
         return 1
     with session:
         links = ZenohLearnerLinks(session, cfg, spec.schema, stop)
-        Learner(cfg, spec, links, stop).run()
+        Learner(cfg, spec, links, stop, evaluate).run()
     return 0

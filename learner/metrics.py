@@ -8,10 +8,11 @@ evaluation that runs during training.
   At the end of a run ``hparams`` writes the resolved config (``section.field``) with final
   metrics for TensorBoard's HParams dashboard, in ``<run dir>/tb/hparams``.
 - ``GreedyEval``: ``train.eval_every`` / ``train.periodic_eval_episodes``: a copy of the online
-  network played greedily on a background thread with its own env (``laneshift.evaluate``).
+  network played greedily on a background thread, by the ``EvaluatePolicy`` the builder hands
+  the learner (``laneshift.actors.evaluation``: the learner never imports the simulator itself).
 
-May import: tensorboardX, torch, numpy, the contract (``laneshift.config``), the learner's
-networks, and ``laneshift.evaluate`` (lazily, on the evaluation thread: it imports the simulator).
+Room: learner. May import: tensorboardX, torch, numpy, the contract (``laneshift.config``,
+``laneshift.qnet``).
 """
 
 from __future__ import annotations
@@ -23,16 +24,21 @@ import threading
 import time
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 import torch
 from tensorboardX import SummaryWriter
 from tensorboardX.summary import hparams as hparams_summaries
 
-from laneshift.config import EnvConfig
+from laneshift.qnet import build_q_network
 
-from .networks import build_q_network
+#: A greedy policy (one observation -> one action).
+Policy = Callable[[np.ndarray], int]
+#: The seam to the env-running side: play ``policy`` greedily for a fixed set of episodes (the
+#: builder binds the env, the episode count and the seeds) and return the rates
+#: (``survival_rate``, ``achievement_rate``, ``return_mean``, ...).
+EvaluatePolicy = Callable[[Policy], dict]
 
 
 def _number(v: Any) -> float | None:
@@ -140,18 +146,18 @@ class _Cancelled(Exception):
 
 
 class GreedyEval:
-    """``episodes`` greedy episodes of a snapshot of the online network, on a background thread.
+    """Greedy episodes of a snapshot of the online network, on a background thread.
 
     ``start`` copies the weights to CPU (the only work on the learner's thread); the thread builds
-    its own network and env (``laneshift.evaluate.evaluate_policy``, the same episode seeds every
-    time, the final summary's) and leaves the result for ``take``. One evaluation at a time: one due
+    its own network and hands its greedy policy to ``evaluate`` (which plays the builder's episodes:
+    the same episode seeds every time, the final summary's) and leaves the result for ``take``. One evaluation at a time: one due
     while another still runs waits for the next check. ``close`` gives a running one a little time,
     then cancels it (at the policy's next step).
     """
 
-    def __init__(self, env_cfg: EnvConfig, every: int, episodes: int, seed: int, obs_shape: tuple[int, ...],
+    def __init__(self, evaluate: EvaluatePolicy, every: int, obs_shape: tuple[int, ...],
                  n_actions: int, hidden: tuple[int, ...], dueling: bool, cnn: str = "nature"):
-        self.env_cfg, self.every, self.episodes, self.seed = env_cfg, every, episodes, seed
+        self.evaluate, self.every = evaluate, every
         self._net_args = (tuple(obs_shape), n_actions, tuple(hidden), dueling, cnn)
         self.next_at = every
         self.failed: str | None = None
@@ -191,8 +197,6 @@ class GreedyEval:
             self._thread.join(5.0)
 
     def _run(self, state: dict[str, torch.Tensor], info: dict) -> None:
-        from laneshift.evaluate import evaluate_policy
-
         began = time.monotonic()
         try:
             net = build_q_network(*self._net_args)
@@ -208,7 +212,7 @@ class GreedyEval:
                 with torch.no_grad():
                     return int(net(torch.as_tensor(x[None])).argmax(dim=1)[0])
 
-            result = evaluate_policy(lambda env: greedy, self.env_cfg, self.episodes, seed=self.seed)
+            result = dict(self.evaluate(greedy))
         except _Cancelled:
             return
         except Exception as exc:  # e.g. the simulator cannot be built on this node: off, said once

@@ -19,11 +19,13 @@ restore drops those items as the ring would have, and keeps every item whose fra
 Layout of ``<run dir>/replay_checkpoint/``: one ``.npy`` per column (``obs``, ``next_obs``,
 ``action``, ``reward``, ``terminated``, ``truncated``, ``steps``, ``actor``, ``version``, ``key``) and
 ``meta.json`` (format version, schema, counters, per-actor stats).
+
+Room: replay_server (component). May import: the contract and laneshift.replay_server; never another
+component.
 """
 
 from __future__ import annotations
 
-import collections
 import json
 import os
 import shutil
@@ -33,7 +35,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .core import BATCH_HISTORY
 from .frames import FrameRingTable
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -63,7 +64,7 @@ def _copy_chunked(core: "ReplayCore", arrays: dict[str, np.ndarray], files: dict
     copied = []
     for begin in range(0, length, chunk):
         end = min(begin + chunk, length)
-        with core._lock:  # short: one chunk copied to memory, then inserts and samples go on
+        with core.lock:  # short: one chunk copied to memory, then inserts and samples go on
             parts = {name: arr[begin:end].copy() for name, arr in arrays.items()}
         copied.append(parts[last])
         for name, part in parts.items():
@@ -97,14 +98,14 @@ def write_checkpoint(core: "ReplayCore", directory: str | Path) -> dict:
         if frames:  # after the rows: see the module's docstring
             _copy_chunked(core, {"frames": table.store.frames, "frame_key": table.store.key},
                           {name: files[name] for name in ("frames", "frame_key")})
-        with core._lock:
+        with core.lock:
             meta = {"format": FORMAT, "obs_shape": list(core.schema.obs_shape), "obs_dtype": core.schema.obs_dtype,
                     "n_actions": core.schema.n_actions, "capacity": table.capacity, "inserted": table.inserted,
-                    "actors": {k: dict(v) for k, v in core.actors.items()}, "actor_index": dict(core._actor_index),
+                    "actors": {k: dict(v) for k, v in core.actors.items()}, "actor_index": dict(core.actor_index),
                     # Read together with "actors", after the copy: restore uses it to drop a batch
                     # the copy caught in part and to find each actor's env steps at its last whole batch.
                     "batch_history": {k: [list(b) for b in h] for k, h in core.batch_history.items()},
-                    "evicted": {k: v[0] for k, v in core._evicted.items()},
+                    "evicted": core.evicted_stats(),
                     "evicted_total": dict(core.evicted_total),
                     "phase": core.phase, "mode": core.mode, "time": time.time(), "tail": table.tail,
                     "layout": "frames" if frames else "stacks",
@@ -210,7 +211,7 @@ def restore_checkpoint(core: "ReplayCore", directory: str | Path) -> int:
                for k, h in meta.get("batch_history", {}).items()}
     order, resume = _whole_batches(order, np.asarray(cols["actor"]), np.asarray(cols["seq"]), index, history)
     order = order[-table.capacity:]  # a smaller table keeps the newest items
-    with core._lock:
+    with core.lock:
         # The items go back oldest first into rows 0..n-1 with keys renumbered 0..n-1: no holes and
         # no collisions whatever the old capacity was (keys only identify items for priority updates).
         n = len(order)
@@ -218,20 +219,10 @@ def restore_checkpoint(core: "ReplayCore", directory: str | Path) -> int:
             getattr(table, name)[:n] = np.asarray(cols[name][order])
         table.key[:n] = np.arange(n)
         table.inserted = n
-        if frames and n:  # rows' oldest frames rise with their keys (frames.py): go on from the newest
-            table._floor = int(np.minimum(table.obs_key[:n].min(axis=1), table.next_key[:n].min(axis=1)).max())
-        core.actors.update({k: {"lost_items": 0, **v} for k, v in meta.get("actors", {}).items()})
-        core._actor_index.update(index)
-        used = set(index.values())
-        core._free_indices.extend(i for i in range(len(index)) if i not in used)
-        now = time.monotonic()
-        for name in core.actors:
-            core._last_seen[name] = now
-            core.batch_history[name] = collections.deque(
-                (tuple(b) for b in meta.get("batch_history", {}).get(name, ())), maxlen=BATCH_HISTORY)
-        for name, stats in meta.get("evicted", {}).items():
-            core._evicted[name] = (stats, collections.deque(maxlen=BATCH_HISTORY))
-        core.evicted_total.update({k: int(v) for k, v in meta.get("evicted_total", {}).items()})
+        if frames:
+            table.restored(n)
+        core.restore_actors(meta.get("actors", {}), index, meta.get("batch_history", {}), meta.get("evicted", {}),
+                            meta.get("evicted_total", {}))
         # Each actor resumes after the newest batch whose items are all here (the stats in
         # meta.json were read after the chunked copy and may name batches it missed), with the env
         # steps it had made by then: every batch missing after a restart shows up as a seq gap and

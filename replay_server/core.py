@@ -20,6 +20,9 @@ The paper's three demo modes decide what is sampled:
     >>> core = ReplayCore(ReplayConfig(capacity=100, min_size=10), TransitionSchema((3,), "float32", 9))
     >>> core.stats()["tables"]["online"]["size"]
     0
+
+Room: replay_server (component). May import: the contract and laneshift.replay_server; never another
+component.
 """
 
 from __future__ import annotations
@@ -38,7 +41,7 @@ from laneshift.wire import (PriorityUpdate, SampledBatch, SampleRequest, Transit
 
 from .frames import FrameRingTable
 from .rate_limiter import SampleToInsertRatio
-from .sum_tree import SumTree
+from .selectors import PrioritizedSelector, UniformSelector
 from .storage import DemoTable, RingTable
 
 MAX_ACTORS = 4096
@@ -62,7 +65,9 @@ class ReplayCore:
         self.cfg = cfg
         self.schema = schema
         self._rng = np.random.default_rng(cfg.seed)
-        self._lock = threading.Lock()
+        # Held by every public method. Hold it (``with core.lock:``) to read several fields at one
+        # instant: the checkpointer and the HTTP API do.
+        self.lock = threading.Lock()
         self.mode = cfg.demo_mode
         held = demo if demo is not None else DemoTable.empty(schema.obs_shape, schema.obs_dtype)
         self.demo_held = held  # everything loaded, for stats and inspection
@@ -92,11 +97,11 @@ class ReplayCore:
         self.limiter = SampleToInsertRatio(cfg.samples_per_insert, cfg.min_size, online_capacity,
                                            cfg.spi_tolerance)
         self.started = time.monotonic()
-        # Counters (all guarded by _lock).
+        # Counters (all guarded by lock).
         self.rejected: collections.Counter[str] = collections.Counter()
         self.dropped: collections.Counter[str] = collections.Counter()
         self.actors: dict[str, dict[str, int]] = {}
-        self._actor_index: dict[str, int] = {}
+        self.actor_index: dict[str, int] = {}  # actor -> its row index in the online table's actor column
         self._free_indices: collections.deque[int] = collections.deque()  # of evicted actors, reused
         self._last_seen: dict[str, float] = {}  # actor -> monotonic time of its newest batch
         self._evicted: collections.OrderedDict[str, tuple[dict[str, int], collections.deque]] = \
@@ -114,16 +119,13 @@ class ReplayCore:
         self.identity: dict[str, str] = {}
         self.checkpoint_failures = 0  # checkpoint writes that failed (full disk, read-only dir)
         self.http_url: str | None = None  # where this server's HTTP inspection API answers, if on
-        # Prioritized sampling: one sum tree over [demo rows | online rows]. Which leaves carry mass
-        # is the demo mode: demo leaves are zero in `none` and in rehearsal phase 2.
-        self.prioritized = cfg.sampler == "prioritized"
-        self._max_priority = 1.0
-        self.tree: SumTree | None = None
-        if self.prioritized:
-            self.tree = SumTree(self.demo.size + self.online.capacity)
-            if self.demo.size:
-                start = (1.0 + cfg.demo_priority_bonus) ** cfg.priority_alpha
-                self.tree.set(np.arange(self.demo.size), np.full(self.demo.size, start))
+        # How rows are picked (selectors.py): uniform, or prioritized over [demo rows | online rows]
+        # (demo leaves carry no mass in `none`, which has none, and from rehearsal's phase 2 on).
+        self.selector: UniformSelector | PrioritizedSelector = (
+            PrioritizedSelector(self.demo.size, self.online.capacity, cfg.priority_alpha, cfg.priority_beta,
+                                cfg.demo_priority_bonus)
+            if cfg.sampler == "prioritized" else UniformSelector())
+        self.prioritized = self.selector.prioritized
         self.priority_updates = 0
 
     # ------------------------------------------------------------------ ingest
@@ -137,12 +139,12 @@ class ReplayCore:
         try:
             batch = decode_transitions(payload, self.schema)
         except WireError as exc:
-            return self._reject(exc.reason)
+            return self.reject(exc.reason)
         except Exception:  # noqa: BLE001 - a decoder bug must not take the server down
-            return self._reject("decode_failed")
+            return self.reject("decode_failed")
         if actor_key is not None and actor_key != batch.actor:
-            return self._reject("actor_mismatch")
-        with self._lock:
+            return self.reject("actor_mismatch")
+        with self.lock:
             stats = self.actors.get(batch.actor)
             if stats is None:
                 stats = self._admit(batch.actor)
@@ -168,13 +170,10 @@ class ReplayCore:
                 self.dropped[f"{self.mode}_phase1"] += len(batch)
                 return None
             tail = self.online.tail
-            keys = self.online.insert(batch, self._actor_index[batch.actor])
-            if self.tree is not None and self.online.tail > tail:  # items gone (frame tables: maybe not overwritten)
-                gone = np.arange(tail, self.online.tail) % self.online.capacity
-                self.tree.set(self.demo.size + gone, np.zeros(len(gone)))
-            if self.tree is not None:  # new items get the highest priority seen: sampled at least once soon
-                self.tree.set(self.demo.size + self.online.rows_of(keys),
-                              np.full(len(keys), self._max_priority ** self.cfg.priority_alpha))
+            keys = self.online.insert(batch, self.actor_index[batch.actor])
+            if self.online.tail > tail:  # items gone (frame tables: maybe not overwritten yet)
+                self.selector.dropped(np.arange(tail, self.online.tail) % self.online.capacity)
+            self.selector.inserted(self.online.rows_of(keys))
             stats["stored"] += len(batch)
             self._rates.add("inserts", len(batch))
         return None
@@ -199,7 +198,7 @@ class ReplayCore:
             stats = {"batches": 0, "items": 0, "stored": 0, "last_seq": -1, "lost_batches": 0, "lost_items": 0,
                      "last_version": -1, "env_steps": 0}
             history = collections.deque(maxlen=BATCH_HISTORY)
-        self._actor_index[actor] = self._free_indices.popleft() if self._free_indices else len(self._actor_index)
+        self.actor_index[actor] = self._free_indices.popleft() if self._free_indices else len(self.actor_index)
         self.actors[actor] = stats
         self.batch_history[actor] = history
         return stats
@@ -208,7 +207,7 @@ class ReplayCore:
         """Move an idle actor's state out of the live table (called under the lock); its counters
         stay in the totals, and its row index goes to the next new actor."""
         stats = self.actors.pop(actor)
-        index = self._actor_index.pop(actor)
+        index = self.actor_index.pop(actor)
         self._free_indices.append(index)
         if isinstance(self.online, FrameRingTable):
             self.online.forget_actor(index)
@@ -221,8 +220,32 @@ class ReplayCore:
         if len(self._evicted) > MAX_EVICTED:
             self._evicted.popitem(last=False)  # forgotten: its counters stay in evicted_total
 
-    def _reject(self, reason: str) -> str:
-        with self._lock:
+    def evicted_stats(self) -> dict[str, dict[str, int]]:
+        """The remembered counters of evicted actors (call under ``lock``): for checkpoints."""
+        return {name: dict(stats) for name, (stats, _) in self._evicted.items()}
+
+    def restore_actors(self, actors: dict[str, dict[str, int]], index: dict[str, int],
+                       history: dict[str, list], evicted: dict[str, dict[str, int]],
+                       evicted_total: dict[str, int]) -> None:
+        """Take back the actors' state from a checkpoint (call under ``lock``, on a fresh core):
+        their counters, row indices (unused ones free for new actors), recent batches, the
+        evicted actors' counters. Every restored actor counts as seen now."""
+        self.actors.update({k: {"lost_items": 0, **v} for k, v in actors.items()})
+        self.actor_index.update(index)
+        used = set(index.values())
+        self._free_indices.extend(i for i in range(len(index)) if i not in used)
+        now = time.monotonic()
+        for name in self.actors:
+            self._last_seen[name] = now
+            self.batch_history[name] = collections.deque((tuple(b) for b in history.get(name, ())),
+                                                         maxlen=BATCH_HISTORY)
+        for name, stats in evicted.items():
+            self._evicted[name] = (stats, collections.deque(maxlen=BATCH_HISTORY))
+        self.evicted_total.update({k: int(v) for k, v in evicted_total.items()})
+
+    def reject(self, reason: str) -> str:
+        """Count a message refused (here or by the service before it reached the core)."""
+        with self.lock:
             self.rejected[reason] += 1
         return reason
 
@@ -235,7 +258,7 @@ class ReplayCore:
             self.limiter.check_request(rows)
         except ValueError as exc:
             return _retry("request_too_large", str(exc), 0)
-        with self._lock:
+        with self.lock:
             if req.min_version >= 0:
                 behind = [a for a in req.actors if self.actors.get(a, {}).get("last_version", -1) < req.min_version]
                 if behind:
@@ -251,21 +274,9 @@ class ReplayCore:
                     return _retry("rate_limited", f"online size {self.online.size}, min {self.limiter.min_size}", 5)
                 n_demo = self.demo.size if self.cfg.retains_demos else 0
                 n_online = self.online.size
-            if self.tree is not None:
-                leaves = self.tree.sample(self._rng, rows)
-                is_demo = leaves < self.demo.size
-                demo_rows, online_rows = leaves[is_demo], leaves[~is_demo] - self.demo.size
-                # Importance weights (N P(i))^-beta, normalised by the batch maximum.
-                prob = self.tree.get(leaves) / self.tree.total
-                weight = (float(n_demo + n_online) * prob) ** -self.cfg.priority_beta
-                weight = (weight / weight.max()).astype(np.float32)
-            else:
-                pick = self._rng.integers(0, n_demo + n_online, size=rows)
-                is_demo = pick < n_demo
-                demo_rows = pick[is_demo]
-                online_rows = (self.online.tail + pick[~is_demo] - n_demo) % self.online.capacity
-                weight = np.ones(rows, np.float32)
-            batch = self._gather(is_demo, demo_rows, online_rows, req.num_batches, weight)
+            drawn = self.selector.draw(self._rng, rows, n_demo, self.online.tail, n_online, self.online.capacity)
+            is_demo = drawn.is_demo
+            batch = self._gather(is_demo, drawn.demo_rows, drawn.online_rows, req.num_batches, drawn.weight)
             if not demo_only:
                 self.samples += rows
             self.sampled_rows += rows
@@ -299,10 +310,10 @@ class ReplayCore:
 
         Returns how many leaves changed. Demo items get ``demo_priority_bonus`` on top (DQfD).
         """
-        if self.tree is None:
+        if not self.prioritized:
             return 0
         cfg = self.cfg
-        with self._lock:
+        with self.lock:
             raw = update.priority.astype(np.float64) + cfg.priority_eps
             demo = update.is_demo.astype(bool)
             raw[demo] += cfg.demo_priority_bonus
@@ -311,22 +322,18 @@ class ReplayCore:
             rows = update.index % self.online.capacity
             # Not overwritten (nor dropped with its frames) since sampled.
             ok_online = ~demo & (self.online.key[rows] == update.index) & (update.index >= self.online.tail)
-            leaves = np.concatenate([update.index[ok_demo], self.demo.size + rows[ok_online]])
-            values = np.concatenate([raw[ok_demo], raw[ok_online]])
-            if len(leaves):
-                self._max_priority = max(self._max_priority, float(values.max()))
-                self.tree.set(leaves, values ** cfg.priority_alpha)
+            changed = self.selector.update(update.index[ok_demo], raw[ok_demo], rows[ok_online], raw[ok_online])
             self.priority_updates += 1
-            return len(leaves)
+            return changed
 
     def handle_priorities(self, payload: bytes | bytearray | memoryview) -> str | None:
         """Bytes in: apply a PRIORITIES message, or count why it was refused (never raises)."""
         try:
             self.update_priorities(decode_priorities(payload))
         except WireError as exc:
-            return self._reject("priorities:" + exc.reason)
+            return self.reject("priorities:" + exc.reason)
         except Exception:  # noqa: BLE001
-            return self._reject("priorities:failed")
+            return self.reject("priorities:failed")
         return None
 
     def handle_sample_query(self, payload: bytes | bytearray | memoryview) -> bytes:
@@ -334,7 +341,7 @@ class ReplayCore:
         try:
             req = decode_sample_request(payload)
         except WireError as exc:
-            self._reject("bad_request:" + exc.reason)
+            self.reject("bad_request:" + exc.reason)
             return encode_error("bad_request", exc.detail)
         result = self.sample(req)
         if isinstance(result, WireError):
@@ -352,16 +359,16 @@ class ReplayCore:
     def set_phase(self, phase: int) -> None:
         if not self.cfg.pretrains or phase not in (1, 2):
             raise ValueError(f"phase {phase} is not valid in demo_mode {self.mode}")
-        with self._lock:
+        with self.lock:
             if phase < self.phase:
                 raise ValueError("rehearsal phases only move forward")
-            if phase == 2 and self.tree is not None and self.demo.size and not self.cfg.retains_demos:
-                self.tree.set(np.arange(self.demo.size), np.zeros(self.demo.size))  # ordinary replay now
+            if phase == 2 and not self.cfg.retains_demos:
+                self.selector.demos_off()  # ordinary replay now
             self.phase = phase
 
     def insert_allowed(self) -> bool:
         """False while the learner is too far behind the ratio (actors wait; see rate_limiter)."""
-        with self._lock:
+        with self.lock:
             if self.phase == 1:
                 return True
             return self.limiter.can_insert(inserts=self.online.inserted, samples=self.samples)
@@ -386,7 +393,7 @@ class ReplayCore:
         """An actor's progress as this server knows it: ``env_steps`` of its newest batch and the
         ``next_seq`` it should send. A restarted actor resumes there, so its budget is neither
         spent twice nor lost, and its sequence numbers go on (gaps are counted as lost)."""
-        with self._lock:
+        with self.lock:
             stats = self.actors.get(actor)
             if stats is None and actor in self._evicted:
                 stats = self._evicted[actor][0]
@@ -397,7 +404,7 @@ class ReplayCore:
     def actor_page(self, offset: int = 0, limit: int = MAX_ACTOR_PAGE) -> dict[str, Any]:
         """Per-actor stats, ``limit`` (at most MAX_ACTOR_PAGE) actors from ``offset`` in name order."""
         offset, limit = max(0, int(offset)), max(1, min(int(limit), MAX_ACTOR_PAGE))
-        with self._lock:
+        with self.lock:
             names = sorted(self.actors)[offset:offset + limit]
             return {"total": len(self.actors), "offset": offset,
                     "actors": {n: dict(self.actors[n]) for n in names}}
@@ -422,7 +429,7 @@ class ReplayCore:
     def stats(self, all_actors: bool = False) -> dict[str, Any]:
         """Counters of everything. ``actors`` lists the first ACTORS_IN_STATS actors by name
         (``all_actors`` lists all: for files and the in-process HTTP views, never for a reply)."""
-        with self._lock:
+        with self.lock:
             shown = sorted(self.actors) if all_actors else sorted(self.actors)[:ACTORS_IN_STATS]
             online_size = self.online.size
             demo_in_buffer = self.demo.size if self.demos_sampled else 0
@@ -449,7 +456,7 @@ class ReplayCore:
                 "sampled_demo_rows": self.sampled_demo_rows,
                 "requests": dict(self.requests),
                 "sampler": {"kind": self.cfg.sampler, "priority_updates": self.priority_updates,
-                            "max_priority": self._max_priority if self.prioritized else None},
+                            "max_priority": self.selector.max_priority if self.prioritized else None},
                 "rejected": dict(self.rejected),
                 "dropped": dict(self.dropped),
                 "actors": {k: dict(self.actors[k]) for k in shown},

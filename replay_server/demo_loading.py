@@ -4,6 +4,9 @@ Shards are validated against the run's env (id, observation shape and dtype, act
 and their sha256 is checked; a mismatch refuses the start with a message naming it. With
 ``n_step > 1`` the shard's transitions become n-step items within each recorded episode
 (laneshift.nstep), the same items the actors send.
+
+Room: replay_server (component). May import: the contract and laneshift.replay_server; never another
+component.
 """
 
 from __future__ import annotations

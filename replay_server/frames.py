@@ -192,6 +192,12 @@ class FrameRingTable(RingTable):
         self.seq[rows] = batch.seq
         self.inserted += end - begin
 
+    def restored(self, n: int) -> None:
+        """Rows 0..n-1 were just written back from a checkpoint: later inserts go on from their
+        newest frames (the oldest frame key of each row never goes down, see ``_floor``)."""
+        if n:
+            self._floor = int(np.minimum(self.obs_key[:n].min(axis=1), self.next_key[:n].min(axis=1)).max())
+
     def forget_actor(self, actor_index: int) -> None:
         """An evicted actor's recent frames are not reused by the next actor given its index."""
         self._recent.pop(actor_index, None)

@@ -1,4 +1,7 @@
-"""``laneshift replay inspect``: the replay server's stats as a readable table."""
+"""``laneshift replay inspect``: the replay server's stats as a readable table.
+
+Room: replay_server (component). May import: the contract and laneshift.replay_server; never another
+component."""
 
 from __future__ import annotations
 

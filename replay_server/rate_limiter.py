@@ -16,6 +16,9 @@ than ``tolerance`` could block both sides forever: such configurations are refus
     False
     >>> rl.can_insert(inserts=300, samples=0)   # 200 * 8 = 1600 rows owed to the learner > 512
     False
+
+Room: replay_server (component). May import: the contract and laneshift.replay_server; never another
+component.
 """
 
 from __future__ import annotations

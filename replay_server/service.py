@@ -7,6 +7,9 @@
   ``.../replay/info`` (JSON: the observation shape/dtype and action count TRANSITIONS must have).
 
 Run it with ``laneshift replay-server --config run.yaml``.
+
+Room: replay_server (component). May import: the contract and laneshift.replay_server; never another
+component.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ import zenoh
 
 from laneshift import transport, wire
 from laneshift.config import RunConfig
+from laneshift.envspec import EnvSpec
 
 from .checkpoint import CheckpointError, restore_checkpoint, write_checkpoint
 from .core import ReplayCore
@@ -125,13 +129,13 @@ class ReplayService:
             try:
                 handle(sample)
             except Exception:  # noqa: BLE001 - never let one message stop the thread
-                self.core._reject("internal_error")
+                self.core.reject("internal_error")
 
     def _ingest(self, sample: zenoh.Sample) -> None:
         try:
             actor = wire.actor_from_transitions_key(str(sample.key_expr))
         except ValueError:
-            self.core._reject("bad_key")
+            self.core.reject("bad_key")
             return
         self.core.ingest(sample.payload.to_bytes(), actor)
 
@@ -187,11 +191,8 @@ class ReplayService:
         return [t.name for t in self._threads if t.is_alive()]
 
 
-def build_core(cfg: RunConfig) -> ReplayCore:
-    """The replay core for a run: schema from the env, demo shards validated against it."""
-    from laneshift.envspec import env_spec
-
-    spec = env_spec(cfg.env)
+def build_core(cfg: RunConfig, spec: EnvSpec) -> ReplayCore:
+    """The replay core for a run: schema from the env's spec, demo shards validated against it."""
     demo = None
     if cfg.replay.demo_paths:  # demos become the same n-step items the actors send
         demo = load_demo_table(cfg.replay.demo_paths, spec, cfg.learner.n_step, cfg.learner.gamma)
@@ -216,8 +217,8 @@ class ReplayServer:
     the Ray actor (``deploy.actors``) both run this.
     """
 
-    def __init__(self, cfg: RunConfig, embedded_router: bool = False):
-        self.cfg, self.embedded_router = cfg, embedded_router
+    def __init__(self, cfg: RunConfig, spec: EnvSpec, embedded_router: bool = False):
+        self.cfg, self.spec, self.embedded_router = cfg, spec, embedded_router
         self.http_port: int | None = None
         self.restored = 0
         self._stop = threading.Event()
@@ -225,7 +226,7 @@ class ReplayServer:
 
     def start(self) -> dict:
         cfg = self.cfg
-        self.core = core = build_core(cfg)  # ValueError: config or shard mismatch, named
+        self.core = core = build_core(cfg, self.spec)  # ValueError: config or shard mismatch, named
         core.identity = {"run_id": cfg.transport.run_id, "config_digest": config_digest(cfg)}
         self.demo_digest = core.demo.digest()
         self.checkpoint_dir = Path(cfg.train.run_dir) / "replay_checkpoint"
@@ -318,10 +319,11 @@ class ReplayServer:
         transport.close_sessions(sessions, timeout_s=10.0, who="replay-server")
 
 
-def run_replay_server(cfg: RunConfig, *, embedded_router: bool = False, ready_file: str | None = None) -> int:
+def run_replay_server(cfg: RunConfig, spec: EnvSpec, *, embedded_router: bool = False,
+                      ready_file: str | None = None) -> int:
     """Serve until SIGINT/SIGTERM. Writes ``ready_file`` (JSON) once it is serving."""
     stop = threading.Event()
-    server = ReplayServer(cfg, embedded_router)
+    server = ReplayServer(cfg, spec, embedded_router)
 
     def on_signal(*_: object) -> None:
         stop.set()

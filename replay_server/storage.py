@@ -6,6 +6,9 @@ actors' or the learner's speed; inserting is a vectorised copy with wrap-around.
     >>> t = RingTable(4, obs_shape=(2,), obs_dtype="float32")
     >>> t.size
     0
+
+Room: replay_server (component). May import: the contract and laneshift.replay_server; never another
+component.
 """
 
 from __future__ import annotations

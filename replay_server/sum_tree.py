@@ -12,6 +12,9 @@ the ancestors of changed leaves.
     4.0
     >>> sorted(set(tree.sample(np.random.default_rng(0), 100).tolist()))
     [0, 3]
+
+Room: replay_server (component). May import: the contract and laneshift.replay_server; never another
+component.
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ import json
 
 import torch
 
-from laneshift import bench_learner
+from laneshift.bench import learner as bench_learner
 from laneshift.cli import build_parser
 
 

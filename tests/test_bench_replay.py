@@ -11,7 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from laneshift import bench_replay, wire
+from laneshift import wire
+from laneshift.bench import replay as bench_replay
 
 
 def _children(pid: int) -> set[int]:

@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from laneshift.checkpoint_curve import evaluate_checkpoints, first_reaching, kept_checkpoints, render, select_best
+from laneshift.studies.checkpoint_curve import evaluate_checkpoints, first_reaching, kept_checkpoints, render, select_best
 from laneshift.config import EnvConfig, load_run_config
 from laneshift.deploy.inprocess import train_inprocess
 
@@ -61,7 +61,7 @@ def test_select_best_ranks_by_the_worst_initial_lane_then_survival_and_keeps_the
 
 def test_sb3_dqn_trains_on_the_laneshift_env_and_reports_a_curve(tmp_path, capsys):
     pytest.importorskip("stable_baselines3")  # optional extra [baselines]; `make` installs it
-    from laneshift.sb3_baseline import train_sb3
+    from laneshift.studies.sb3_baseline import train_sb3
 
     res = train_sb3(EnvConfig(scenario="straight", max_steps=50), env_steps=400, eval_every=200, eval_episodes=2,
                     seed=0, eval_seed=5, out=tmp_path)

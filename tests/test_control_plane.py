@@ -165,7 +165,7 @@ class _NoLinks:
 
 
 def test_a_restarted_learner_resumes_its_state_above_every_published_version(tmp_path):
-    from laneshift.envspec import env_spec
+    from laneshift.actors.envs import spec_of as env_spec
     from laneshift.learner.loop import Learner
 
     cfg = load_run_config(overrides={"env.scenario": "lka", "train.run_dir": str(tmp_path), "learner.hidden": "16"})
@@ -194,7 +194,7 @@ def torch_equal(a, b) -> bool:
 
 
 def test_learner_checkpoint_on_an_unwritable_path_is_counted_not_fatal(tmp_path):
-    from laneshift.envspec import env_spec
+    from laneshift.actors.envs import spec_of as env_spec
     from laneshift.learner.loop import Learner
 
     cfg = load_run_config(overrides={"env.scenario": "lka", "train.run_dir": str(tmp_path), "learner.hidden": "16"})
@@ -207,13 +207,14 @@ def test_learner_checkpoint_on_an_unwritable_path_is_counted_not_fatal(tmp_path)
 
 
 def test_a_second_replay_server_on_the_same_run_dir_is_refused(tmp_path):
+    from laneshift.actors.envs import spec_of as env_spec
     from laneshift.replay_server.service import ReplayServer
 
     cfg = load_run_config(overrides={"env.scenario": "lka", "train.run_dir": str(tmp_path)})
-    first = ReplayServer(cfg)
+    first = ReplayServer(cfg, env_spec(cfg.env))
     first.checkpoint_dir = tmp_path / "replay_checkpoint"
     first._lock_checkpoint_dir()
-    second = ReplayServer(cfg)
+    second = ReplayServer(cfg, env_spec(cfg.env))
     second.checkpoint_dir = tmp_path / "replay_checkpoint"
     with pytest.raises(ValueError, match="another replay server is using"):
         second._lock_checkpoint_dir()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from laneshift import bench_env
+from laneshift.bench import env as bench_env
 
 
 def test_json_output_has_the_required_fields(capsys) -> None:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from laneshift.config import EnvConfig
-from laneshift.evaluate import evaluate_policy, lka_response, plot_lka_response, wilson_ci95
+from laneshift.studies.evaluate import evaluate_policy, lka_response, plot_lka_response, wilson_ci95
 
 
 def test_wilson_interval_known_values():
@@ -42,8 +42,8 @@ def test_keep_lane_policy_on_straight_never_achieves_from_a_non_target_lane():
 
 def test_a_checkpoint_of_another_observation_layout_is_refused_with_the_fix(tmp_path, capsys):
     from laneshift.cli import main
-    from laneshift.learner.networks import build_q_network
-    from laneshift.learner.weights import save_checkpoint
+    from laneshift.qnet import build_q_network
+    from laneshift.qnet import save_checkpoint
 
     path = save_checkpoint(build_q_network((67,), 9, (8,)), tmp_path / "old.safetensors",
                            {"obs_shape": "67", "hidden": "8", "n_actions": 9})
@@ -55,7 +55,7 @@ def test_a_checkpoint_of_another_observation_layout_is_refused_with_the_fix(tmp_
 
 def test_crashes_are_counted_by_kind_and_starting_lane():
     from laneshift.config import EnvConfig
-    from laneshift.evaluate import evaluate_policy
+    from laneshift.studies.evaluate import evaluate_policy
 
     # Always turning left leaves the road or hits someone: every episode crashes, each counted once.
     r = evaluate_policy(lambda env: (lambda obs: 1), EnvConfig(scenario="straight", max_steps=200), 6, seed=3)
@@ -70,9 +70,9 @@ def test_demo_agreement_counts_the_states_where_the_greedy_action_is_the_demonst
 
     from laneshift.demos.generate import generate_shard
     from laneshift.demos.shard import load_shard
-    from laneshift.evaluate import demo_agreement
-    from laneshift.learner.networks import build_q_network
-    from laneshift.learner.weights import save_checkpoint
+    from laneshift.studies.evaluate import demo_agreement
+    from laneshift.qnet import build_q_network
+    from laneshift.qnet import save_checkpoint
 
     shard_dir = generate_shard(tmp_path / "demos", env_id_or_scenario="straight", env_kwargs={"max_steps": 30},
                                episodes=2, seed=0)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from laneshift.experiments import register
+from laneshift.studies.experiments import register
 
 
 def test_compare_runs_methods_and_seeds_and_writes_the_table(tmp_path):
@@ -41,8 +41,8 @@ def test_compare_runs_methods_and_seeds_and_writes_the_table(tmp_path):
 
 def test_reward_presets_study_trains_each_condition_with_its_own_exploration(tmp_path):
     from laneshift.config import load_run_config
-    from laneshift.reward_study import preset_overrides
-    from laneshift.reward_study import register as register_presets
+    from laneshift.studies.reward_study import preset_overrides
+    from laneshift.studies.reward_study import register as register_presets
 
     # Table 1: condition 1 explores 1.0 -> 0.3, condition 5 1.0 -> 0.1.
     assert load_run_config(overrides=preset_overrides(1)).actor.epsilon_final == 0.3
@@ -69,7 +69,7 @@ def test_train_method_applies_the_named_settings_under_mode_and_set(monkeypatch,
     """``laneshift train --method dqfd-bc`` is the experiment's settings in one flag; --set wins."""
     from laneshift import cli
     from laneshift.deploy import local
-    from laneshift.experiments import METHODS
+    from laneshift.config import METHODS
 
     seen = {}
     monkeypatch.setattr(local, "train_local", lambda cfg, **kw: seen.setdefault("cfg", cfg) and 0)

@@ -15,8 +15,8 @@ from laneshift.actors.exploration import make_schedule
 from laneshift.actors.policy import QPolicy
 from laneshift.config import ActorConfig, LearnerConfig
 from laneshift.learner.dqn import DoubleDQN
-from laneshift.learner.networks import build_q_network
-from laneshift.learner.weights import load_checkpoint, load_into, save_checkpoint, tensors_digest, to_wire
+from laneshift.qnet import build_q_network
+from laneshift.qnet import load_checkpoint, load_into, save_checkpoint, tensors_digest, to_wire
 
 torch.set_num_threads(1)
 
@@ -350,9 +350,9 @@ def test_cross_entropy_on_demo_rows_teaches_the_demonstrators_action_through_a_d
 
 
 def test_dueling_checkpoints_load_back_as_dueling_policies(tmp_path):
-    from laneshift.evaluate import load_greedy_policy
-    from laneshift.learner.networks import DuelingHead, build_q_network
-    from laneshift.learner.weights import save_checkpoint
+    from laneshift.studies.evaluate import load_greedy_policy
+    from laneshift.qnet import DuelingHead, build_q_network
+    from laneshift.qnet import save_checkpoint
 
     net = build_q_network((5,), 9, (16,), dueling=True)
     assert isinstance(net.net[-1], DuelingHead)

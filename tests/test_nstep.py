@@ -111,12 +111,13 @@ class _RecordingLinks:
         self.weights: bytes | None = weights
         self.batches: list = []
 
-    def send_transitions(self, payload: bytes) -> None:
+    def send_transitions(self, batch) -> None:
         from laneshift import wire
 
-        self.batches.append(wire.decode_transitions(payload, self.schema))
+        # Through the wire's bytes, as the zenoh links send it.
+        self.batches.append(wire.decode_transitions(wire.encode_transitions(batch), self.schema))
 
-    def send_episode(self, payload: bytes) -> None:
+    def send_episode(self, record) -> None:
         pass
 
     def latest_weights(self) -> bytes | None:
@@ -136,9 +137,9 @@ class _RecordingLinks:
 def _worker_items(n_step: int, env_steps: int) -> tuple[dict, list[int]]:
     from laneshift.actors.worker import EnvWorker
     from laneshift.config import ActorConfig, EnvConfig
-    from laneshift.envspec import env_spec
-    from laneshift.learner.networks import build_q_network
-    from laneshift.learner.weights import to_wire
+    from laneshift.actors.envs import spec_of as env_spec
+    from laneshift.qnet import build_q_network
+    from laneshift.qnet import to_wire
 
     env_cfg = EnvConfig(scenario="straight", max_steps=40)  # several episode ends in the run
     spec = env_spec(env_cfg)

@@ -12,8 +12,8 @@ import torch
 
 from laneshift import wire
 from laneshift.actors.policy import NumpyMLP, QPolicy
-from laneshift.learner.networks import build_q_network
-from laneshift.learner.weights import to_wire
+from laneshift.qnet import build_q_network
+from laneshift.qnet import to_wire
 
 
 @pytest.mark.parametrize("hidden,dueling", [((256, 256), False), ((64,), True), ((32, 16, 8), False), ((), True)])

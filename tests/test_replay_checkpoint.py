@@ -197,7 +197,7 @@ def test_a_batch_the_copy_caught_in_part_is_dropped_and_counted_on_restore(tmp_p
     monkeypatch.setattr(ckpt, "CHUNK_BYTES", 8 * real)  # 8 rows a chunk
     # Chunks: rows 0-7, 8-15, ..., 40-47 (the 6th), 48-55. Batch 4 (rows 40-49) arrives after the
     # 6th chunk was copied: rows 48-49 of it are in the copy, rows 40-47 are not.
-    core._lock = _CopyHook(core._lock, after=6, action=lambda: core.ingest(batch(4)))
+    core.lock = _CopyHook(core.lock, after=6, action=lambda: core.ingest(batch(4)))
     write_checkpoint(core, tmp_path / "ckpt")
     fresh = ReplayCore(ReplayConfig(capacity=100, min_size=1), SCHEMA)
     assert restore_checkpoint(fresh, tmp_path / "ckpt") == 40  # batch 4's two caught rows dropped
@@ -220,7 +220,7 @@ def test_a_batch_after_the_copy_is_counted_lost_not_hidden_by_later_stats(tmp_pa
     monkeypatch.setattr(ckpt, "CHUNK_BYTES", 1)  # one row a chunk
     # Batch 10 overwrites rows 0-9 after the copy passed them: not in the checkpoint, yet the
     # stats read at the end name it (last_seq 10, env_steps 110).
-    core._lock = _CopyHook(core._lock, after=20, action=lambda: core.ingest(batch(10)))
+    core.lock = _CopyHook(core.lock, after=20, action=lambda: core.ingest(batch(10)))
     write_checkpoint(core, tmp_path / "ckpt")
     meta = json.loads((tmp_path / "ckpt" / "meta.json").read_text())
     assert meta["actors"]["w0"]["last_seq"] == 10
@@ -255,7 +255,7 @@ def test_per_actor_state_is_bounded_and_idle_actors_are_evicted(monkeypatch):
     assert core.actors["a0"]["batches"] == 2 and core.actors["a0"]["lost_batches"] == 0
     total = core.stats()["actors_total"]
     assert total["stored"] == 70 and total["batches"] == 7 and total["lost_items"] == 0
-    assert len(set(core._actor_index.values())) == 4  # row indices reused, never more than MAX_ACTORS
+    assert len(set(core.actor_index.values())) == 4  # row indices reused, never more than MAX_ACTORS
 
 
 def test_restored_counters_match_the_resume_point_so_nothing_is_stored_twice(tmp_path, monkeypatch):
@@ -267,7 +267,7 @@ def test_restored_counters_match_the_resume_point_so_nothing_is_stored_twice(tmp
     for seq in range(3):  # rows 0-29
         core.ingest(batch(seq))
     monkeypatch.setattr(ckpt, "CHUNK_BYTES", 1)  # one row a chunk
-    core._lock = _CopyHook(core._lock, after=31, action=lambda: core.ingest(batch(3)))  # rows 30-39, passed already
+    core.lock = _CopyHook(core.lock, after=31, action=lambda: core.ingest(batch(3)))  # rows 30-39, passed already
     write_checkpoint(core, tmp_path / "ckpt")
     fresh = ReplayCore(ReplayConfig(capacity=100, min_size=1), SCHEMA)
     assert restore_checkpoint(fresh, tmp_path / "ckpt") == 30

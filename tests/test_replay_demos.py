@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from laneshift import wire
+from laneshift.actors.envs import spec_of
 from laneshift.config import load_run_config
 from laneshift.demos.generate import generate_shard
 from laneshift.demos.shard import load_shard
@@ -22,7 +23,7 @@ def straight_shard(tmp_path_factory) -> str:
 def test_sampled_demo_items_are_byte_identical_to_the_file(straight_shard):
     cfg = load_run_config(overrides={"env.scenario": "straight", "replay.demo_mode": "rehearsal",
                                      "replay.demo_paths": straight_shard})
-    core = build_core(cfg)
+    core = build_core(cfg, spec_of(cfg.env))
     shard = load_shard(straight_shard)
     assert core.stats()["tables"]["demo"]["sha256"] == shard.sha256
     reply = core.handle_sample_query(wire.encode_sample_request(wire.SampleRequest(256, 2)))
@@ -42,7 +43,7 @@ def test_n_step_runs_serve_the_shard_as_n_step_items(straight_shard):
 
     cfg = load_run_config(overrides={"env.scenario": "straight", "replay.demo_mode": "rehearsal",
                                      "replay.demo_paths": straight_shard, "learner.n_step": 5})
-    core = build_core(cfg)
+    core = build_core(cfg, spec_of(cfg.env))
     shard = load_shard(straight_shard)
     ret, nxt, term, steps = nstep_arrays(shard.rewards, shard.next_observations, shard.terminations,
                                          shard.episode_ids, 5, cfg.learner.gamma)
@@ -61,15 +62,15 @@ def test_shard_of_another_env_or_preset_is_refused(straight_shard):
     cfg = load_run_config(overrides={"env.scenario": "lka", "replay.demo_mode": "rehearsal",
                                      "replay.demo_paths": straight_shard})
     with pytest.raises(ValueError, match="replay.demo_paths: .*(env|shape)"):
-        build_core(cfg)
+        build_core(cfg, spec_of(cfg.env))
     cfg = load_run_config(overrides={"env.scenario": "straight", "env.reward_preset": 2,
                                      "replay.demo_mode": "rehearsal", "replay.demo_paths": straight_shard})
     with pytest.raises(ValueError, match="reward_preset=5.*reward_preset=2"):
-        build_core(cfg)
+        build_core(cfg, spec_of(cfg.env))
 
 
 def test_retention_refuses_a_shard_too_small_for_the_ratio(straight_shard):
     cfg = load_run_config(overrides={"env.scenario": "straight", "replay.demo_mode": "retention",
                                      "replay.capacity": 1_000_000, "replay.demo_paths": straight_shard})
     with pytest.raises(ValueError, match="replay.demo_ratio: retention needs 100000 demo transitions"):
-        build_core(cfg)
+        build_core(cfg, spec_of(cfg.env))

@@ -112,7 +112,7 @@ def test_prioritized_sampling_never_draws_an_item_dropped_for_its_frames():
     assert core.online.evicted_for_frames > 0
     check_samples(core, sent, draws=40)
     gone = np.arange(core.online.inserted - core.online.capacity, core.online.tail) % core.online.capacity
-    assert (core.tree.get(core.demo.size + gone) == 0).all()
+    assert (core.selector.priority_of(core.demo.size + gone) == 0).all()
 
 
 def test_checkpoint_round_trip_keeps_every_item_and_its_frames(tmp_path):

@@ -24,7 +24,7 @@ from hypothesis import strategies as st
 
 from laneshift import wire
 from laneshift.config import ReplayConfig
-from laneshift.replay_server import http_api
+from laneshift.replay_server import http_api, http_models
 from laneshift.replay_server.core import ReplayCore
 from laneshift.replay_server.http_api import make_app, serve_http
 from laneshift.replay_server.inspect import render
@@ -113,7 +113,7 @@ def test_healthz_ok_and_503_while_the_core_lock_is_stuck(monkeypatch):
     body = r.json()
     assert body["status"] == "ok" and body["mode"] == "none" and body["online_size"] == 14 and body["uptime_s"] >= 0
     monkeypatch.setattr(http_api, "HEALTH_LOCK_TIMEOUT_S", 0.05)
-    with core._lock:
+    with core.lock:
         r = c.get("/healthz")
     assert r.status_code == 503 and r.json()["status"] == "unavailable"
 
@@ -229,7 +229,7 @@ def test_float32_obs_are_written_shortest_and_exact(monkeypatch):
     c = client(core)
     r = c.get("/tables/online/items", params={"include_obs": True})
     assert '"obs":[0.2,0.33333334,-1e-07]' in r.text and '"reward":0.1,' in r.text
-    monkeypatch.setattr(http_api, "SHORT_FLOATS_MAX", 0)  # big pages: float64 of the same float32 values
+    monkeypatch.setattr(http_models, "SHORT_FLOATS_MAX", 0)  # big pages: float64 of the same float32 values
     long = c.get("/tables/online/items", params={"include_obs": True})
     assert '"obs":[0.20000000298023224,' in long.text
     for body in (r.json(), long.json()):
@@ -257,7 +257,7 @@ def test_items_show_priorities_with_the_prioritized_sampler():
     core = make_core(capacity=50, sampler="prioritized")
     fill(core, 14)
     items = client(core).get("/tables/online/items").json()["items"]
-    assert [i["priority"] for i in items] == pytest.approx(core.tree.get(np.arange(10)).tolist())
+    assert [i["priority"] for i in items] == pytest.approx(core.selector.priority_of(np.arange(10)).tolist())
     assert "priority" not in client(make_core()).get("/tables/online/items").json()["items"]
 
 
@@ -349,7 +349,7 @@ def test_metrics_exposition_format_and_values():
     core = make_core("retention", demo=300, capacity=1000, demo_ratio=0.1)
     fill(core, 140)
     sample(core, 100)
-    core._reject('we"ird\\reason\nx')  # label values are escaped
+    core.reject('we"ird\\reason\nx')  # label values are escaped
     core.last_checkpoint = {"items": 140, "seconds": 0.5, "path": "/x", "monotonic": time.monotonic() - 3}
     r = client(core).get("/metrics")
     assert r.status_code == 200 and r.headers["content-type"] == "text/plain; version=0.0.4; charset=utf-8"

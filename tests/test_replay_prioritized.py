@@ -60,7 +60,7 @@ def test_new_items_get_the_max_priority_and_updates_move_mass():
     assert b.weight[b.index == 7].max() < b.weight[b.index != 7].min() <= 1.0
     # The max priority now goes to new items.
     core.ingest(batch(5))
-    assert core.tree.get(np.array([55]))[0] == pytest.approx(1000.0, rel=1e-3)
+    assert core.selector.priority_of(np.array([55]))[0] == pytest.approx(1000.0, rel=1e-3)
 
 
 def test_updates_for_evicted_items_are_ignored():
@@ -80,9 +80,9 @@ def test_demo_bonus_and_rehearsal_phases():
     b = core.sample(wire.SampleRequest(64))
     assert b.is_demo.all()
     core.update_priorities(wire.PriorityUpdate(np.array([0, 1]), np.ones(2, np.uint8), np.array([0.0, 3.0], np.float32)))
-    assert core.tree.get(np.array([0, 1])).tolist() == pytest.approx([1.0, 4.0])  # |td| + eps + bonus
+    assert core.selector.priority_of(np.array([0, 1])).tolist() == pytest.approx([1.0, 4.0])  # |td| + eps + bonus
     core.set_phase(2)
-    assert core.tree.get(np.arange(10)).sum() == 0  # ordinary replay: demos no longer drawn
+    assert core.selector.priority_of(np.arange(10)).sum() == 0  # ordinary replay: demos no longer drawn
     core.ingest(batch(0))
     assert not core.sample(wire.SampleRequest(64)).is_demo.any()
     assert core.update_priorities(wire.PriorityUpdate(np.array([0]), np.ones(1, np.uint8),

@@ -2,7 +2,7 @@
 on a tiny synthetic results dir (no training): the across-seed table, the Table 2 bar chart, the
 curves against env steps, episodes and wall clock and the periodic greedy evaluations from the runs' metrics.jsonl, then again from the
 episodes.json it keeps once the run dirs are gone; older logs without env steps; bad paths.
-May import: laneshift.experiments, laneshift.cli, numpy, pytest and the standard library.
+May import: laneshift.studies.experiments, laneshift.cli, numpy, pytest and the standard library.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from laneshift import cli
-from laneshift.experiments import EPISODES_FILE, render_table, table2_rows
+from laneshift.studies.experiments import EPISODES_FILE, render_table, table2_rows
 
 PNG = b"\x89PNG"
 

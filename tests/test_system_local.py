@@ -24,7 +24,7 @@ from laneshift.deploy.chaos import alive as _alive
 from laneshift.deploy.chaos import descendants as _descendants
 from laneshift.deploy.local import train_local
 from laneshift.deploy.processes import ProcessGroup, wait_for_file
-from laneshift.learner.weights import load_checkpoint, tensors_digest
+from laneshift.qnet import load_checkpoint, tensors_digest
 
 # Small and fast, but every mechanism on: rate limiter, prefetch, target syncs, checkpoints.
 FAST = {"env.scenario": "lka", "actor.workers": 2, "actor.send_every": 50, "actor.epsilon_decay_steps": 1000,

@@ -23,7 +23,7 @@ from laneshift.envspec import EnvSpec
 from laneshift.learner.dqn import METRIC_NAMES
 from laneshift.learner.loop import Learner
 from laneshift.learner.metrics import GreedyEval
-from laneshift.learner.networks import build_q_network
+from laneshift.qnet import build_q_network
 
 event_accumulator = pytest.importorskip("tensorboard.backend.event_processing.event_accumulator")
 
@@ -213,13 +213,20 @@ def test_rehearsal_phase1_logs_under_pretrain_at_update_steps(tmp_path):
     assert not any(t.startswith("learner/") for t in acc.Tags()["scalars"])
 
 
+def _episodes_of(env_cfg: EnvConfig, episodes: int):
+    """The EvaluatePolicy the builder hands the learner: ``episodes`` greedy episodes on the env."""
+    from laneshift.actors.evaluation import evaluate_policy
+
+    return lambda greedy: evaluate_policy(lambda env: greedy, env_cfg, episodes, seed=0)
+
+
 def test_greedy_eval_runs_a_copy_of_the_network_on_its_own_thread():
-    from laneshift.envspec import env_spec
+    from laneshift.actors.envs import spec_of as env_spec
 
     env_cfg = EnvConfig(scenario="lka", max_steps=20)
     schema = env_spec(env_cfg).schema
     net = build_q_network(schema.obs_shape, schema.n_actions, (8,))
-    ev = GreedyEval(env_cfg, every=100, episodes=2, seed=0, obs_shape=schema.obs_shape,
+    ev = GreedyEval(_episodes_of(env_cfg, 2), every=100, obs_shape=schema.obs_shape,
                     n_actions=schema.n_actions, hidden=(8,), dueling=False)
     assert not ev.due(99) and ev.due(100)
     ev.start(net, 250, updates=7, version=3)
@@ -235,11 +242,11 @@ def test_greedy_eval_runs_a_copy_of_the_network_on_its_own_thread():
 
 
 def test_a_running_eval_is_cancelled_at_close():
-    from laneshift.envspec import env_spec
+    from laneshift.actors.envs import spec_of as env_spec
 
     env_cfg = EnvConfig(scenario="lka")
     schema = env_spec(env_cfg).schema
-    ev = GreedyEval(env_cfg, every=1, episodes=10_000, seed=0, obs_shape=schema.obs_shape,
+    ev = GreedyEval(_episodes_of(env_cfg, 10_000), every=1, obs_shape=schema.obs_shape,
                     n_actions=schema.n_actions, hidden=(8,), dueling=False)
     ev.start(build_q_network(schema.obs_shape, schema.n_actions, (8,)), 1)
     began = time.monotonic()

@@ -998,3 +998,29 @@ def test_property_every_decoder_raises_only_wire_error(which, mutations):
         decoder(mutate(data, mutations))
     except WireError:
         pass
+
+
+def test_an_episode_record_round_trips_and_keeps_its_json_bytes():
+    rec = wire.EpisodeRecord("w0", 12.5, 90, crashed=True, on_target_lane=False, weights_version=3, phase=2,
+                             env_steps=1000, epsilon=0.25)
+    data = wire.encode_episode(rec)
+    assert wire.decode_episode(data) == rec
+    # The same bytes the worker sent as a hand-built JSON body before the type existed.
+    assert data == wire.encode_json({"actor": "w0", "return": 12.5, "length": 90, "crashed": True,
+                                     "on_target_lane": False, "weights_version": 3, "phase": 2,
+                                     "env_steps": 1000, "epsilon": 0.25})
+    assert wire.decode_episode(wire.encode_json({"return": 1, "length": 2})) == wire.EpisodeRecord("", 1.0, 2)
+
+
+@pytest.mark.parametrize("body, field", [
+    ({"length": 2}, "'return' is required"),
+    ({"return": "1", "length": 2}, "'return' must be float"),
+    ({"return": 1.0, "length": -1}, "'length' must be >= 0"),
+    ({"return": 1.0, "length": 2.5}, "'length' must be int"),
+    ({"return": 1.0, "length": 2, "crashed": 1}, "'crashed' must be bool"),
+    ({"return": 1.0, "length": 2, "actor": 7}, "'actor' must be str"),
+])
+def test_a_bad_episode_record_is_refused_naming_its_field(body, field):
+    with pytest.raises(wire.WireError) as err:
+        wire.decode_episode(wire.encode_json(body))
+    assert err.value.reason == "bad_value" and field in str(err.value)

@@ -4,25 +4,31 @@ Importing this package registers the gymnasium ids below, so that
 ``gym.make("laneshift.actors.envs:laneshift/StraightLaneChange-v0")`` (or, once
 ``laneshift.actors`` imports this package, ``"laneshift.actors:laneshift/..."``) works in a fresh
 process such as a Ray worker.  Registration is lazy: the env modules are imported by ``gym.make``.
+
+``make(cfg)`` builds a run's env from its ``EnvConfig``; ``spec_of(cfg)`` reads the env's
+observation and action spaces into the contract's ``EnvSpec``, for whoever launches the processes
+that never build a simulator themselves (the replay server, the learner).
+
+Room: actors (the env-running component). May import: the contract (``laneshift.config``,
+``laneshift.envspec``, ``laneshift.wire``), gymnasium, highway-env, numpy.
 """
 
 from __future__ import annotations
 
-from typing import Any
+import functools
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
+import numpy as np
+
+if TYPE_CHECKING:
+    from laneshift.config import EnvConfig
+    from laneshift.envspec import EnvSpec
 
 from .actions import META_ACTIONS, PAPER_ACTIONS, paper_action_index
 from .rewards import REWARD_PRESETS, RewardPreset, compute_reward
 
-#: Scenario name -> gymnasium id.
-SCENARIOS: dict[str, str] = {
-    "straight": "laneshift/StraightLaneChange-v0",
-    "merge": "laneshift/MergeLaneChange-v0",
-    "curve": "laneshift/CurveLaneChange-v0",
-    "roundabout": "laneshift/RoundaboutLaneChange-v0",
-    "lka": "laneshift/LaneKeepingAssist-v0",
-}
+from laneshift.envspec import SCENARIOS  # scenario name -> gymnasium id (the contract's)
 
 _ENTRY_POINTS: dict[str, str] = {
     "laneshift/StraightLaneChange-v0": "laneshift.actors.envs.lane_change:StraightLaneChangeEnv",
@@ -56,6 +62,30 @@ def make_env(scenario_or_id: str, **kwargs: Any) -> gym.Env:
     return gym.make(env_id, **kwargs)
 
 
+def make(cfg: EnvConfig, **extra: Any) -> gym.Env:
+    """The run's env, as configured (``extra``: e.g. ``render_mode``)."""
+    return make_env(cfg.scenario, **{**cfg.env_kwargs(), **extra})
+
+
+@functools.lru_cache(maxsize=16)
+def spec_of(cfg: EnvConfig) -> EnvSpec:
+    """Build the env once and read its spaces (cached per config): what the launcher computes
+    once and hands to the components (highway-env's import and one env: ~2.4 s, ~60 MB)."""
+    from laneshift.envspec import EnvSpec
+    from laneshift.wire import TransitionSchema
+
+    env = make(cfg)
+    try:
+        obs_space, act_space = env.observation_space, env.action_space
+        if not isinstance(act_space, gym.spaces.Discrete):
+            raise ValueError(f"env.scenario {cfg.scenario}: DQN needs a Discrete action space, got {act_space}")
+        schema = TransitionSchema(obs_shape=tuple(obs_space.shape), obs_dtype=np.dtype(obs_space.dtype).str,
+                                  n_actions=int(act_space.n))
+        return EnvSpec(env.spec.id if env.spec else cfg.scenario, schema, tuple(sorted(cfg.env_kwargs().items())))
+    finally:
+        env.close()
+
+
 __all__ = [
     "META_ACTIONS",
     "PAPER_ACTIONS",
@@ -63,6 +93,8 @@ __all__ = [
     "SCENARIOS",
     "RewardPreset",
     "compute_reward",
+    "make",
     "make_env",
     "paper_action_index",
+    "spec_of",
 ]

@@ -18,6 +18,9 @@ it gives ``delta = atan(2 tan(asin(kappa L / 2)))`` (= atan(kappa L) to first or
 **Meta actions** (``action_set="meta"``, ``Discrete(5)``): highway-env's DiscreteMetaAction
 labels and semantics (target lane +-1, target speed +- one step of a speed grid, tracked by
 highway-env's ControlledVehicle lateral/speed controller laws).
+
+Room: actors, the env-running component. May import: the contract and laneshift.actors; never
+another component.
 """
 
 from __future__ import annotations

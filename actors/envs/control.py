@@ -2,6 +2,9 @@
 scripted demonstrator.
 
 Sign convention here: the paper's, "left" positive (lateral offset, relative heading, curvature).
+
+Room: actors, the env-running component. May import: the contract and laneshift.actors; never
+another component.
 """
 
 from __future__ import annotations

@@ -9,6 +9,9 @@
   curvature, rounded to the nearest of the 31 steering actions.
 
 Both are called as ``action = driver(obs)`` and read ``env.unwrapped`` for the real state.
+
+Room: actors, the env-running component. May import: the contract and laneshift.actors; never
+another component.
 """
 
 from __future__ import annotations

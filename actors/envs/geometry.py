@@ -15,6 +15,9 @@ world angle of travel; the lane's lateral axis n = (-sin h, cos h) points to the
 direction of travel (towards higher lane indices); world curvature k = dh/ds, so k > 0 is a right
 turn on screen.  A parallel lane offset by d along n has curvature k / (1 - k d) and length
 L (1 - k d).
+
+Room: actors, the env-running component. May import: the contract and laneshift.actors; never
+another component.
 """
 
 from __future__ import annotations

@@ -14,6 +14,9 @@ registered ids are its subclasses.  Per step (``policy_frequency`` Hz, default 1
 
 The episode terminates when the ego vehicle collides or leaves the road, and is truncated after
 ``max_steps`` steps.
+
+Room: actors, the env-running component. May import: the contract and laneshift.actors; never
+another component.
 """
 
 from __future__ import annotations

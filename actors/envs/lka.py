@@ -17,6 +17,9 @@ The steering u is held constant over each sample (zero-order hold) and rho is co
 6-state system is discretised *exactly*: the augmented matrix [[A, B, E], [0, 0, 0]] * Ts is
 exponentiated once at construction (pure numpy, scaling and squaring of a Taylor series) and each
 step is one 6x6 matrix-vector product.
+
+Room: actors, the env-running component. May import: the contract and laneshift.actors; never
+another component.
 """
 
 from __future__ import annotations

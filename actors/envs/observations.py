@@ -24,6 +24,9 @@ other vehicles (the K nearest within 60 m, nearest first; absent slots are all z
     difference (observer lane - other lane) / 2 (+ = other is on the left).
 
 Every feature is clipped to [-5, 5], the bounds of the observation space.
+
+Room: actors, the env-running component. May import: the contract and laneshift.actors; never
+another component.
 """
 
 from __future__ import annotations

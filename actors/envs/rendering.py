@@ -14,6 +14,9 @@ The palette makes the paper's figure-3 regions distinguishable in grayscale:
 off-road (forbidden region) black, non-target lanes dark grey, the target lane light grey, lane
 markings near-white, constant-speed vehicles very dark, policy-driven vehicles mid grey, the ego
 vehicle white.
+
+Room: actors, the env-running component. May import: the contract and laneshift.actors; never
+another component.
 """
 
 from __future__ import annotations

@@ -13,6 +13,9 @@ Definitions used by every lane-change scenario (they are the env's, stated once 
   direction is neither and gets 0 for the motion term.
 * **in target lane** / **in non-target lane**: the lane whose centre is nearest to the ego
   vehicle's centre is (or is not) the target lane.
+
+Room: actors, the env-running component. May import: the contract and laneshift.actors; never
+another component.
 """
 
 from __future__ import annotations

@@ -13,6 +13,9 @@ not the other way round.
 
 Default traffic (per scenario, overridable by env kwargs): lane speeds fall from left to right,
 ``linspace(14, 8, n)`` m/s, i.e. 14/11/8 m/s on three lanes.
+
+Room: actors, the env-running component. May import: the contract and laneshift.actors; never
+another component.
 """
 
 from __future__ import annotations

@@ -15,6 +15,9 @@ This replaces highway-env's slow parts while keeping its models:
   window being a ring of length back + front.  Spacing is preserved modulo the ring, so traffic
   never overlaps and its density around the ego vehicle stays constant for any episode length.
   Closed roads (the ring) need no window: traffic circulates around the whole lane.
+
+Room: actors, the env-running component. May import: the contract and laneshift.actors; never
+another component.
 """
 
 from __future__ import annotations

@@ -1,4 +1,6 @@
-"""``python -m laneshift`` is the ``laneshift`` command."""
+"""``python -m laneshift`` is the ``laneshift`` command.
+
+Room: the tools (python -m laneshift). May import: anything in laneshift."""
 
 from .cli import main
 

@@ -13,6 +13,8 @@ examples:
 `laneshift COMMAND --help` lists a command's options with their defaults. Long commands report
 progress on stderr (a bar on a terminal, a line every 10 s otherwise; LANESHIFT_PROGRESS=0: none).
 Bad input exits with code 2 and one line saying what is wrong.
+
+Room: the tools (the laneshift command). May import: anything in laneshift.
 """
 
 from __future__ import annotations
@@ -160,7 +162,7 @@ def _train(args: argparse.Namespace) -> int:
 
     preset = None
     if args.method:
-        from laneshift.experiments import method_settings
+        from laneshift.config import method_settings
 
         preset = method_settings(args.method, "--method")
     shortcuts = {
@@ -247,17 +249,21 @@ def _end_service_process(rc: int) -> NoReturn:
 
 
 def _replay_server(args: argparse.Namespace) -> int:
+    from laneshift.actors.envs import spec_of
     from laneshift.replay_server.service import run_replay_server
 
     cfg = _config_from(args, {"replay.http_port": args.http_port, "replay.http_host": args.http_host})
-    return _end_service_process(run_replay_server(cfg, embedded_router=args.embedded_router,
+    # The one env this process builds: to learn the observation's shape and the action count.
+    return _end_service_process(run_replay_server(cfg, spec_of(cfg.env), embedded_router=args.embedded_router,
                                                   ready_file=args.ready_file))
 
 
 def _learner(args: argparse.Namespace) -> int:
+    from laneshift.deploy.builder import Builder
     from laneshift.learner.loop import run_learner
 
-    return _end_service_process(run_learner(_config_from(args)))
+    builder = Builder(_config_from(args))  # the env's spec and the periodic greedy evaluation
+    return _end_service_process(run_learner(builder.cfg, builder.spec, builder.greedy_evaluation()))
 
 
 def _router(args: argparse.Namespace) -> int:
@@ -287,7 +293,7 @@ def _add_services(sub: argparse._SubParsersAction) -> None:
 
 
 def _eval(args: argparse.Namespace) -> int:
-    from laneshift.evaluate import evaluate_checkpoint, format_result
+    from laneshift.studies.evaluate import evaluate_checkpoint, format_result
 
     cfg = _config_from(args, {"env.scenario": args.scenario, "env.initial_lane": args.initial_lane,
                               "env.max_steps": args.max_steps, "env.observation": args.observation})
@@ -295,14 +301,14 @@ def _eval(args: argparse.Namespace) -> int:
         result = evaluate_checkpoint(args.checkpoint, cfg.env, episodes=args.episodes, seed=args.seed,
                                      progress="eval")
         if args.demo_agreement:
-            from laneshift.evaluate import demo_agreement
+            from laneshift.studies.evaluate import demo_agreement
 
             result["demo_agreement"] = demo_agreement(args.checkpoint, args.demo_agreement)
     except (ValueError, OSError) as exc:  # a checkpoint of another env or layout, or no such file
         print(f"laneshift eval: {exc}", file=sys.stderr)
         return 2
     if cfg.env.is_lka:
-        from laneshift.evaluate import load_greedy_policy, lka_response, plot_lka_response
+        from laneshift.studies.evaluate import load_greedy_policy, lka_response, plot_lka_response
 
         greedy = load_greedy_policy(args.checkpoint)
         resp = lka_response(lambda env: greedy)
@@ -385,10 +391,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     register_demos(demos.add_subparsers(dest="demos_cmd", required=True, metavar="ACTION"))
     experiment = sub.add_parser("experiment", help="reproducible experiments (the paper's Table 2 comparison)")
-    from laneshift.checkpoint_curve import register as register_checkpoint_curve
-    from laneshift.experiments import register as register_experiments
-    from laneshift.reward_study import register as register_presets
-    from laneshift.sb3_baseline import register as register_sb3
+    from laneshift.studies.checkpoint_curve import register as register_checkpoint_curve
+    from laneshift.studies.experiments import register as register_experiments
+    from laneshift.studies.reward_study import register as register_presets
+    from laneshift.studies.sb3_baseline import register as register_sb3
 
     which = experiment.add_subparsers(dest="experiment_cmd", required=True, metavar="WHICH")
     register_experiments(which)
@@ -397,19 +403,19 @@ def build_parser() -> argparse.ArgumentParser:
     register_presets(which)
     bench = sub.add_parser("bench", help="benchmarks (env speed, replay throughput, learner updates)")
     bench_sub = bench.add_subparsers(dest="bench_cmd", required=True, metavar="WHAT")
-    from laneshift.bench_env import register as register_bench_env
-    from laneshift.bench_replay import register as register_bench_replay
-    from laneshift.bench_learner import register as register_bench_learner
+    from laneshift.bench.env import register as register_bench_env
+    from laneshift.bench.replay import register as register_bench_replay
+    from laneshift.bench.learner import register as register_bench_learner
 
     register_bench_env(bench_sub)
     register_bench_replay(bench_sub)
     register_bench_learner(bench_sub)
-    from laneshift.deploy.bench_run import register as register_bench_run
-    from laneshift.deploy.bench_worker import register as register_bench_worker
+    from laneshift.bench.run import register as register_bench_run
+    from laneshift.bench.worker import register as register_bench_worker
 
     register_bench_run(bench_sub)
     register_bench_worker(bench_sub)
-    from laneshift.deploy.bench_all import register as register_bench_all
+    from laneshift.bench.suite import register as register_bench_all
 
     register_bench_all(bench_sub)
     from laneshift.deploy.chaos import register as register_chaos

@@ -13,6 +13,9 @@ A bad value is refused with a ``ConfigError`` naming the field, e.g.
     >>> cfg = load_run_config(overrides={"env.scenario": "lka", "actor.workers": "2"})
     >>> cfg.actor.workers
     2
+
+Room: the contract (shared by every process). May import: other contract modules only, never a
+component, deploy or a tool.
 """
 
 from __future__ import annotations
@@ -211,7 +214,7 @@ class LearnerConfig:
     n_step: int = 1
     batch_size: int = 256  # MATLAB minibatch 256
     hidden: tuple[int, ...] = (256, 256)  # MLP for vector observations (CNN for grayscale)
-    # The CNN for grayscale frames: nature (Mnih et al. 2015) or small (learner/networks.py SmallCNN,
+    # The CNN for grayscale frames: nature (Mnih et al. 2015) or small (laneshift.qnet SmallCNN,
     # about 3x the updates/s on 2 CPU cores; what the pixel Table 2 runs use).
     cnn: str = "nature"
     target_update_period: int = 500  # updates between hard target-network syncs
@@ -578,3 +581,33 @@ def save_run_config(cfg: RunConfig, path: str | Path) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(yaml.safe_dump(cfg.to_dict(), sort_keys=False))
     return path
+
+
+# ---------------------------------------------------------------------------- method presets
+# The named methods of `laneshift train --method` and `laneshift experiment compare --methods`:
+# config overrides on top of the run's config (the user's --set values win over them).
+
+# DQfD (Hester et al. 2018): pre-training on demos (20,000 updates), demos kept in the buffer
+# (30 % of 300,000 items, i.e. about 300 scripted episodes), large-margin loss on demo rows,
+# 10-step returns. Phase 2 explores from epsilon 0.3: the pre-trained network already drives.
+_DQFD: dict[str, Any] = {
+    "replay.demo_mode": "dqfd", "learner.margin_loss_weight": 1.0, "learner.n_step": 10,
+    "learner.phase1_updates": 20_000, "replay.capacity": 300_000, "replay.demo_ratio": 0.3,
+    "actor.phase2_epsilon_start": 0.3}
+
+METHODS: dict[str, dict[str, Any]] = {
+    "none": {"replay.demo_mode": "none"},
+    "retention": {"replay.demo_mode": "retention"},
+    "rehearsal": {"replay.demo_mode": "rehearsal"},
+    "dqfd": _DQFD,
+    # dqfd plus supervised imitation (cross-entropy on demo rows) and a dueling head: the two
+    # changes that made the pre-trained network drive like the demonstrator (docs/RESULTS.md).
+    "dqfd-bc": {**_DQFD, "learner.bc_loss_weight": 1.0, "learner.dueling": True},
+}
+
+
+def method_settings(method: str, option: str = "method") -> dict[str, Any]:
+    """The named method's config overrides; an unknown name is refused naming ``option``."""
+    if method not in METHODS:
+        raise ConfigError(f"{option}: unknown {method!r} (known: {', '.join(METHODS)})")
+    return METHODS[method]

@@ -14,6 +14,9 @@ converts whole demo shards (:func:`nstep_arrays`), and both give the same items 
     []
     >>> [(it.obs, it.reward, it.next_obs, it.steps) for it in acc.push(10, 1, 2.0, 20, True, False)]
     [(0, 2.0, 20, 2), (10, 2.0, 20, 1)]
+
+Room: the contract (shared by every process). May import: other contract modules only, never a
+component, deploy or a tool.
 """
 
 from __future__ import annotations

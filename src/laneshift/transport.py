@@ -11,6 +11,9 @@ messages in a measurement on this machine.
     >>> from laneshift.config import TransportConfig
     >>> with open_session(TransportConfig(), mode="client") as session:  # doctest: +SKIP
     ...     session.put("laneshift/run/x", b"...")
+
+Room: the contract (shared by every process). May import: other contract modules only, never a
+component, deploy or a tool.
 """
 
 from __future__ import annotations

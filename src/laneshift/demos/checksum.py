@@ -14,6 +14,9 @@ Example::
     >>> len(transition_sha256(z[:, None], np.zeros(1, np.int64), z, z[:, None],
     ...     np.zeros(1, bool), np.zeros(1, bool), np.zeros(1, np.int32)))
     64
+
+Room: the contract (shared by every process). May import: other contract modules only, never a
+component, deploy or a tool.
 """
 
 from __future__ import annotations

@@ -10,6 +10,8 @@ Example::
         --driver human-like          # scripted driver + reaction delay + action noise; not a person
     laneshift demos record --scenario straight --episodes 20 --out runs/demos/human
     laneshift demos inspect runs/demos/straight        # also writes runs/demos/straight_returns.png
+
+Room: the tools (demo tools). May import: anything in laneshift.
 """
 
 from __future__ import annotations

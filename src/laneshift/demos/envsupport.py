@@ -4,7 +4,9 @@ The demos package never hard-codes an environment: it takes a gymnasium id (or o
 laneshift's scenario short names) plus flat env kwargs. laneshift's own ids are registered by
 importing ``laneshift.actors.envs``; any other registered gymnasium id works as well.
 
-Imports: gymnasium and, lazily, ``laneshift.actors.envs``.
+Contract floor (the shard format resolves env ids with it). May import: gymnasium,
+``laneshift.envspec``; ``make_env`` alone imports ``laneshift.actors.envs`` (by name, at call time:
+building an env is a tool's job, never the shard reader's).
 
 Example::
 
@@ -22,6 +24,8 @@ from typing import Any
 
 import gymnasium as gym
 
+from laneshift.envspec import SCENARIOS
+
 
 ENVS_MODULE = "laneshift.actors.envs"  # importing it registers laneshift's gymnasium ids
 
@@ -35,9 +39,8 @@ def _laneshift_envs() -> Any | None:
 
 
 def scenarios() -> dict[str, str]:
-    """laneshift's scenario short names -> gymnasium ids (empty if the envs are not installed)."""
-    module = _laneshift_envs()
-    return dict(getattr(module, "SCENARIOS", {}) or {})
+    """laneshift's scenario short names -> gymnasium ids."""
+    return dict(SCENARIOS)
 
 
 def resolve_env_id(env_id_or_scenario: str) -> str:
@@ -46,10 +49,12 @@ def resolve_env_id(env_id_or_scenario: str) -> str:
     known = scenarios()
     if env_id_or_scenario in known:
         return known[env_id_or_scenario]
+    if env_id_or_scenario in known.values():
+        return env_id_or_scenario
     try:
         gym.spec(env_id_or_scenario)
     except gym.error.Error:
-        names = ", ".join(known) or "none: laneshift.actors.envs is not installed"
+        names = ", ".join(known)
         raise ValueError(f"unknown scenario or env id {env_id_or_scenario!r} (scenarios: {names}; "
                          f"or a registered gymnasium id such as CartPole-v1)") from None
     except ImportError as exc:  # module:Id whose module does not import

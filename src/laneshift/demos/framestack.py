@@ -21,6 +21,9 @@ Example::
     >>> prefix, frames = split_frame_stacks(stacks)
     >>> bool(np.array_equal(rebuild_frame_stacks(prefix, frames), stacks))
     True
+
+Room: the contract (shared by every process). May import: other contract modules only, never a
+component, deploy or a tool.
 """
 
 from __future__ import annotations

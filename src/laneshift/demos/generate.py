@@ -16,6 +16,8 @@ Example::
     >>> path = generate_shard("runs/demos/straight", env_id_or_scenario="straight",
     ...     env_kwargs={"observation": "vector"}, episodes=50, seed=0)     # doctest: +SKIP
     >>> load_shard(path).metadata["survival_rate"]                          # doctest: +SKIP
+
+Room: the tools (demo tools). May import: anything in laneshift.
 """
 
 from __future__ import annotations

@@ -25,6 +25,8 @@ Example::
     >>> policy = HumanLikePolicy(seed=0, reaction_steps=5, action_noise=0.07)
     >>> generate_shard("runs/demos/human-like", env_id_or_scenario="straight", env_kwargs={},
     ...                episodes=50, seed=0, policy="human-like")       # doctest: +SKIP
+
+Room: the tools (demo tools). May import: anything in laneshift.
 """
 
 from __future__ import annotations

@@ -12,6 +12,8 @@ Example::
     >>> summary = summarize(read_verified("runs/demos/straight"))       # doctest: +SKIP
     >>> print(format_summary(summary))                                   # doctest: +SKIP
     >>> plot_returns(summary, "runs/demos/straight_returns.png")         # doctest: +SKIP
+
+Room: the tools (demo tools). May import: anything in laneshift.
 """
 
 from __future__ import annotations

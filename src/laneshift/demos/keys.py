@@ -16,6 +16,8 @@ Example::
     0
     >>> control_command("escape")
     'quit'
+
+Room: the tools (demo tools). May import: anything in laneshift.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 Both are read from the episode's final ``info`` dict: ``info["crashed"]`` (highway-env's flag,
 which laneshift's envs also set when the car leaves the road) and ``info["on_target_lane"]``.
-As in the paper (and ``laneshift.evaluate``), an episode achieves only if it is on the target
+As in the paper (and ``laneshift.studies.evaluate``), an episode achieves only if it is on the target
 lane at its last step *without* having crashed: a crash on the target lane is no achievement.
 A missing key gives None ("unknown"), and a rate over episodes is None unless every episode
 knows it.
@@ -14,6 +14,9 @@ Example::
     >>> outcome_rates([episode_outcome({"crashed": False, "on_target_lane": True}),
     ...                episode_outcome({"crashed": True, "on_target_lane": True})])
     {'survival_rate': 0.5, 'achievement_rate': 0.5}
+
+Room: the contract (shared by every process). May import: other contract modules only, never a
+component, deploy or a tool.
 """
 
 from __future__ import annotations

@@ -16,6 +16,8 @@ Example::
 
     >>> record_shard("runs/demos/human-straight", env_id_or_scenario="straight",
     ...              env_kwargs={"observation": "grayscale"}, episodes=20, seed=0)  # doctest: +SKIP
+
+Room: the tools (demo tools). May import: anything in laneshift.
 """
 
 from __future__ import annotations

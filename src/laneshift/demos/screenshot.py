@@ -13,6 +13,8 @@ Imports: pygame (through ``.record``), the demos package, laneshift's scripted d
 Example::
 
     SDL_VIDEODRIVER=dummy python -m laneshift.demos.screenshot docs/img/demos-record-window.png
+
+Room: the tools (demo tools). May import: anything in laneshift.
 """
 
 from __future__ import annotations

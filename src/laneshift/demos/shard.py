@@ -33,6 +33,9 @@ Example::
     ...                    obs_shape=env.observation_space.shape,
     ...                    obs_dtype=env.observation_space.dtype, n_actions=9)  # doctest: +SKIP
     >>> len(shard), shard.sha256[:12]                                           # doctest: +SKIP
+
+Room: the contract (shared by every process). May import: other contract modules only, never a
+component, deploy or a tool.
 """
 
 from __future__ import annotations

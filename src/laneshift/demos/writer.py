@@ -23,6 +23,8 @@ Example::
     >>> write_shard("/tmp/cartpole-demo", [episode], env_id="CartPole-v1", env_kwargs={},
     ...             recorded_by="scripted", seeds=[0])                  # doctest: +SKIP
     PosixPath('/tmp/cartpole-demo')
+
+Room: the tools (demo tools). May import: anything in laneshift.
 """
 
 from __future__ import annotations

@@ -1,4 +1,8 @@
-"""Q-networks: an MLP for vector observations, the Nature CNN or a small CNN for stacked grayscale frames,
+"""The Q-network and its weights codec: the part of the contract that actors, the learner and
+evaluation share (contract floor: imports torch, numpy, safetensors-format helpers from
+``laneshift.wire``; never a component).
+
+Q-networks: an MLP for vector observations, the Nature CNN or a small CNN for stacked grayscale frames,
 each with a plain or a dueling head (Wang et al. 2016: Q = V + A - mean A).
 
     >>> net = build_q_network((25,), 9, hidden=(64, 64))
@@ -12,13 +16,25 @@ so the Q-values of the 9 actions differ by a tiny fraction of their size. A sepa
 stream lets the advantage head spend its capacity on those small differences; pre-trained on
 the scripted demos it chose the demonstrator's action more often and survived more
 (docs/RESULTS.md).
+
+Weights travel and rest as safetensors (``wire.encode_weights`` with a version; checkpoints are
+plain safetensors files that ``safetensors.torch.load_file`` reads): ``to_wire``, ``load_into``
+(strict names and shapes), ``save_checkpoint`` (atomic), ``load_checkpoint``.
+
+Room: the contract (shared by every process). May import: other contract modules only, never a
+component, deploy or a tool.
 """
 
 from __future__ import annotations
 
+from pathlib import Path
+
+import numpy as np
 import torch
 from torch import nn
 
+from laneshift import wire
+from laneshift.wire import tensors_digest  # noqa: F401 - re-exported: a checkpoint's identity
 
 class DuelingHead(nn.Module):
     """Q(s, a) = V(s) + A(s, a) - mean_a A(s, a) from a feature vector."""
@@ -103,3 +119,37 @@ def build_q_network(obs_shape: tuple[int, ...], n_actions: int, hidden: tuple[in
             raise ValueError(f"no CNN {cnn!r} (one of {', '.join(CNNS)})")
         return CNNS[cnn](tuple(obs_shape), n_actions, dueling)  # type: ignore[arg-type]
     raise ValueError(f"no Q-network for observation shape {obs_shape}")
+
+
+# ------------------------------------------------------------------ weights
+
+def to_wire(net: nn.Module, version: int, phase: int, updates: int) -> bytes:
+    tensors = {k: v.detach().cpu().numpy() for k, v in net.state_dict().items()}
+    return wire.encode_weights(wire.Weights(version=version, phase=phase, updates=updates, tensors=tensors))
+
+
+def load_into(net: nn.Module, tensors: dict[str, np.ndarray]) -> None:
+    """Load arrays into ``net``; refuses missing/extra keys or wrong shapes (strict)."""
+    state = {k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in tensors.items()}
+    expected = net.state_dict()
+    if set(state) != set(expected):
+        raise ValueError(f"weights keys {sorted(state)} do not match the network {sorted(expected)}")
+    for k, v in state.items():
+        if tuple(v.shape) != tuple(expected[k].shape):
+            raise ValueError(f"weights {k}: shape {tuple(v.shape)} != {tuple(expected[k].shape)}")
+    net.load_state_dict(state)
+
+
+def save_checkpoint(net: nn.Module, path: str | Path, meta: dict[str, str | int | float]) -> Path:
+    """A checkpoint is a plain safetensors file (readable by ``safetensors.torch.load_file``)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tensors = {k: v.detach().cpu().numpy() for k, v in net.state_dict().items()}
+    tmp = path.with_suffix(".tmp")
+    tmp.write_bytes(wire.safetensors_dumps(tensors, {k: str(v) for k, v in meta.items()}))
+    tmp.replace(path)  # atomic: a crash never leaves a half-written checkpoint
+    return path
+
+
+def load_checkpoint(path: str | Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    return wire.safetensors_loads(Path(path).read_bytes())

@@ -18,6 +18,8 @@ import os
 import sys
 import time
 
+from laneshift import wire
+
 
 class CountingLinks:
     """The worker's seams, answering at once: weights once, insert always allowed; counts bytes."""
@@ -26,11 +28,11 @@ class CountingLinks:
         self._weights: bytes | None = weights
         self.batches = self.bytes = self.episodes = 0
 
-    def send_transitions(self, payload: bytes) -> None:
+    def send_transitions(self, batch: wire.TransitionBatch) -> None:
         self.batches += 1
-        self.bytes += len(payload)
+        self.bytes += len(wire.encode_transitions(batch))  # the encoding is part of a worker's cost
 
-    def send_episode(self, payload: bytes) -> None:
+    def send_episode(self, record: wire.EpisodeRecord) -> None:
         self.episodes += 1
 
     def latest_weights(self) -> bytes | None:
@@ -49,10 +51,10 @@ class CountingLinks:
 
 def bench_worker(scenario: str, envs: int, steps: int, epsilon: float = 0.1) -> dict:
     from laneshift.config import load_run_config
-    from laneshift.learner.networks import build_q_network  # the learner's network, for its weights
-    from laneshift.learner.weights import to_wire
+    from laneshift.qnet import build_q_network  # the learner's network, for its weights
+    from laneshift.qnet import to_wire
 
-    from .builder import Builder
+    from laneshift.deploy.builder import Builder
 
     cfg = load_run_config(overrides={"env.scenario": scenario, "actor.workers": 1, "actor.envs_per_worker": envs,
                                      "actor.epsilon_start": epsilon, "actor.epsilon_final": epsilon})

@@ -10,6 +10,8 @@ Baselines (``--baselines``): the straight scenario's 300-step evaluation (``--sc
 another), for both initial-lane settings, with a random policy, a keep-lane constant-speed policy
 and the ScriptedDriver: survival rate (no collision / off-road in 300 steps) and achievement rate
 (on the target lane at step 300), as in the paper's Table 2; plus the LKAExpert on the LKA plant.
+
+Room: the tools (benchmarks). May import: anything in laneshift.
 """
 
 from __future__ import annotations

@@ -9,6 +9,8 @@ counts training only (evaluation time is subtracted), so it compares with lanesh
 ``elapsed_s``.
 
     laneshift experiment sb3 --scenario straight --env-steps 150000 --eval-every 25000 --out runs/sb3
+
+Room: the tools (studies). May import: anything in laneshift.
 """
 
 from __future__ import annotations
@@ -18,10 +20,10 @@ import json
 import time
 from pathlib import Path
 
-from .config import EnvConfig
-from .envspec import make_env
-from .evaluate import INITIAL_LANES, evaluate_lanes
-from .progress import progress, write
+from laneshift.config import EnvConfig
+from laneshift.actors.envs import make as make_env
+from laneshift.studies.evaluate import INITIAL_LANES, evaluate_lanes
+from laneshift.progress import progress, write
 
 
 def train_sb3(env_cfg: EnvConfig, env_steps: int, eval_every: int, eval_episodes: int, seed: int,
@@ -97,7 +99,7 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from .cli import fraction, non_negative_int, positive_int
+    from laneshift.cli import fraction, non_negative_int, positive_int
 
     p = subparsers.add_parser("sb3", help="stable-baselines3 DQN on the same env (single-process baseline)")
     p.add_argument("--scenario", default="straight", help="straight | merge | curve | roundabout | lka")

@@ -22,6 +22,8 @@ Measured:
 
     laneshift bench replay                      # text
     laneshift bench replay --duration 5 --json  # one JSON object
+
+Room: the tools (benchmarks). May import: anything in laneshift.
 """
 
 from __future__ import annotations
@@ -186,7 +188,7 @@ def synthetic_message(actor: str, schema: wire.TransitionSchema, rows: int, rng:
 
 def _publisher_main(argv: list[str]) -> int:
     """One synthetic-actor process: publishes for every actor key given, round robin, until SIGTERM."""
-    p = argparse.ArgumentParser(prog="python -m laneshift.bench_replay _publish")
+    p = argparse.ArgumentParser(prog="python -m laneshift.bench.replay _publish")
     p.add_argument("--router", required=True)
     p.add_argument("--run-id", required=True)
     p.add_argument("--actors", required=True, help="comma-separated actor names")
@@ -345,7 +347,7 @@ class _Bench:
     def start_server(self, name: str, observation: str, capacity: int) -> wire.TransitionSchema:
         from laneshift.config import load_run_config, save_run_config
         from laneshift.deploy.processes import ChildFailed, wait_for_file
-        from laneshift.envspec import env_spec
+        from laneshift.actors.envs import spec_of as env_spec
 
         overrides: dict[str, Any] = {
             "env.scenario": "straight", "env.observation": observation, "replay.capacity": capacity,
@@ -401,7 +403,7 @@ class _Bench:
             self.n_pub += 1
             tag = f"pub{self.n_pub}"
             ready, report, go = self.work / f"{tag}.ready", self.work / f"{tag}.json", self.work / f"{tag}.go"
-            argv = [sys.executable, "-m", "laneshift.bench_replay", "_publish", "--router", self.endpoint,
+            argv = [sys.executable, "-m", "laneshift.bench.replay", "_publish", "--router", self.endpoint,
                     "--run-id", run_id, "--actors", ",".join(names[j::count]), "--batch", str(self.args.batch),
                     "--obs-shape", ",".join(map(str, schema.obs_shape)), "--obs-dtype", schema.obs_dtype,
                     "--n-actions", str(schema.n_actions), "--ready", str(ready), "--go", str(go), "--report", str(report),

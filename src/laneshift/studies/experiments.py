@@ -4,7 +4,7 @@ Every method is trained with the same budget and seeds through the real local sy
 workers, zenoh, replay-server and learner processes), then its final network is evaluated
 greedily from both initial-lane settings; the baseline drivers are evaluated on the same episode
 seeds. A method's rate is the mean of its per-seed rates with a 95 % percentile bootstrap
-interval over seeds (``laneshift.studies_stats``); the rate pooled over all evaluation episodes
+interval over seeds (``laneshift.studies.stats``); the rate pooled over all evaluation episodes
 with its Wilson interval is kept beside it, labelled pooled (it treats the episodes of different
 seeds as independent, so it understates the uncertainty).
 
@@ -22,6 +22,8 @@ run dirs are gone), ``curves_env_steps.png`` / ``curves_episodes.png`` / ``curve
 figure for logs without env steps) and, for runs with ``train.eval_every``, ``curves_eval.png``
 (greedy survival and achievement during training). ``replot`` redraws the table and figures of a
 study from its ``results.json`` and ``episodes.json`` (or the runs' ``metrics.jsonl``).
+
+Room: the tools (studies). May import: anything in laneshift.
 """
 
 from __future__ import annotations
@@ -37,36 +39,10 @@ from typing import Any
 
 import numpy as np
 
-from .config import ConfigError, RunConfig, load_run_config
-from .evaluate import INITIAL_LANES, evaluate_lanes, load_greedy_policy, wilson_ci95
-from .progress import progress, write
-from .studies_stats import RESAMPLES, bootstrap_ci, curves_on_grid
-
-# DQfD (Hester et al. 2018): pre-training on demos (20,000 updates), demos kept in the buffer
-# (30 % of 300,000 items, i.e. about 300 scripted episodes), large-margin loss on demo rows,
-# 10-step returns. Phase 2 explores from epsilon 0.3: the pre-trained network already drives.
-_DQFD: dict[str, Any] = {
-    "replay.demo_mode": "dqfd", "learner.margin_loss_weight": 1.0, "learner.n_step": 10,
-    "learner.phase1_updates": 20_000, "replay.capacity": 300_000, "replay.demo_ratio": 0.3,
-    "actor.phase2_epsilon_start": 0.3}
-
-METHODS: dict[str, dict[str, Any]] = {
-    "none": {"replay.demo_mode": "none"},
-    "retention": {"replay.demo_mode": "retention"},
-    "rehearsal": {"replay.demo_mode": "rehearsal"},
-    "dqfd": _DQFD,
-    # dqfd plus supervised imitation (cross-entropy on demo rows) and a dueling head: the two
-    # changes that made the pre-trained network drive like the demonstrator (docs/RESULTS.md).
-    "dqfd-bc": {**_DQFD, "learner.bc_loss_weight": 1.0, "learner.dueling": True},
-}
-
-
-def method_settings(method: str, option: str = "method") -> dict[str, Any]:
-    """The named method's config overrides; an unknown name is refused naming ``option``."""
-    if method not in METHODS:
-        raise ConfigError(f"{option}: unknown {method!r} (known: {', '.join(METHODS)})")
-    return METHODS[method]
-
+from laneshift.config import METHODS, ConfigError, RunConfig, load_run_config, method_settings  # noqa: F401
+from laneshift.studies.evaluate import INITIAL_LANES, evaluate_lanes, load_greedy_policy, wilson_ci95
+from laneshift.progress import progress, write
+from laneshift.studies.stats import RESAMPLES, bootstrap_ci, curves_on_grid
 
 def method_config(base: RunConfig, method: str, seed: int, run_dir: Path, env_steps: int,
                   user: dict[str, Any] | None = None) -> RunConfig:
@@ -99,7 +75,7 @@ class _TrainLog(io.StringIO):
 def train_logged(cfg: RunConfig, log_path: Path, label: str | None = None) -> None:
     """One real local training run, its console output kept in ``log_path``; raises if it failed.
     ``label``: show the run's env steps as a progress bar on stderr with this label."""
-    from .deploy.local import train_local
+    from laneshift.deploy.local import train_local
 
     with progress(total=cfg.train.env_steps, desc=label or "", unit="step", leave=False,
                   disable=label is None) as bar:
@@ -118,7 +94,7 @@ def pooled(evals: list[dict], key: str) -> dict:
 
 
 def run_compare(args: argparse.Namespace) -> dict:
-    from .cli import parse_set
+    from laneshift.cli import parse_set
 
     user = parse_set(args.set)
     base = load_run_config(args.config, {"env.scenario": args.scenario, "actor.workers": args.workers, **user})
@@ -427,7 +403,7 @@ def write_episodes(episodes: dict[str, dict], out_dir: Path) -> Path:
 
 def plot_curves(results: dict, out_dir: Path, window: int = 100, episodes: dict[str, dict] | None = None) -> list[Path]:
     """Like the paper's figs 4/5: moving-average return and episode length per method, the mean over
-    seeds with a 95 % bootstrap band over seeds (:func:`laneshift.studies_stats.curves_on_grid`:
+    seeds with a 95 % bootstrap band over seeds (:func:`laneshift.studies.stats.curves_on_grid`:
     each seed's moving average interpolated onto a common grid over the range every seed covers),
     against env steps (``curves_env_steps.png``) and wall clock (``curves_wallclock.png``). Runs
     whose episodes lack env steps (older logs) give ``curves_episodes.png`` instead of the env-step
@@ -565,7 +541,7 @@ def run_replot(args: argparse.Namespace) -> int:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from .cli import add_set_arg, positive_int
+    from laneshift.cli import add_set_arg, positive_int
 
     p = subparsers.add_parser("compare", help="train and evaluate methods x seeds (the paper's Table 2)")
     p.add_argument("--scenario", default="straight", help="straight | merge | curve | roundabout")

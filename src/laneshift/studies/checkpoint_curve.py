@@ -7,6 +7,8 @@ many env steps / how much wall time until X % achievement" (the issue's 80 % que
 where the policy peaked, and picks the validation-selected checkpoint (:func:`select_best`).
 
     laneshift experiment checkpoints --run-dir runs/exp/dqfd-s0 --episodes 50 --copy-best best.safetensors
+
+Room: the tools (studies). May import: anything in laneshift.
 """
 
 from __future__ import annotations
@@ -17,9 +19,9 @@ import shutil
 import sys
 from pathlib import Path
 
-from .config import ConfigError, EnvConfig, load_run_config
-from .evaluate import INITIAL_LANES, evaluate_lanes, load_checkpoint_policy
-from .progress import progress
+from laneshift.config import ConfigError, EnvConfig, load_run_config
+from laneshift.studies.evaluate import INITIAL_LANES, evaluate_lanes, load_checkpoint_policy
+from laneshift.progress import progress
 
 
 def kept_checkpoints(run_dir: str | Path) -> list[Path]:
@@ -119,7 +121,7 @@ def _lane(text: str) -> str:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from .cli import comma_list, non_negative_int, positive_int
+    from laneshift.cli import comma_list, non_negative_int, positive_int
 
     p = subparsers.add_parser("checkpoints", help="greedy scores of every kept checkpoint of a run")
     p.add_argument("--run-dir", required=True, help="a run trained with --set learner.keep_checkpoints=true")

@@ -27,6 +27,8 @@ bracketed by ``torch.cuda.synchronize()``.
 
     laneshift bench learner                          # auto device, text table
     laneshift bench learner --device cuda --json     # one JSON object
+
+Room: the tools (benchmarks). May import: anything in laneshift.
 """
 
 from __future__ import annotations
@@ -175,7 +177,7 @@ def bare_step(case: Case, cfg: LearnerConfig, device: torch.device) -> Callable[
     """The same update in plain torch, batches resident on the device, nothing read back."""
     import torch
     import torch.nn.functional as F
-    from laneshift.learner.networks import build_q_network
+    from laneshift.qnet import build_q_network
 
     torch.manual_seed(cfg.seed)
     online = build_q_network(case.obs_shape, N_ACTIONS, cfg.hidden, cfg.dueling, case.cnn).to(device)

@@ -11,6 +11,8 @@ each run's final greedy evaluation.
 
 Returns are only comparable within a condition: the conditions pay different rewards for the
 same behaviour, which is why the table also gives survival and achievement.
+
+Room: the tools (studies). May import: anything in laneshift.
 """
 
 from __future__ import annotations
@@ -23,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from .config import ConfigError, load_run_config
-from .progress import progress, write
+from laneshift.config import ConfigError, load_run_config
+from laneshift.progress import progress, write
 
 
 def preset_overrides(preset: int) -> dict[str, Any]:
@@ -40,9 +42,9 @@ def preset_overrides(preset: int) -> dict[str, Any]:
 
 
 def run_presets(args: argparse.Namespace) -> dict:
-    from .cli import parse_set
-    from .evaluate import evaluate_checkpoint
-    from .experiments import _episode_curves, train_logged
+    from laneshift.cli import parse_set
+    from laneshift.studies.evaluate import evaluate_checkpoint
+    from laneshift.studies.experiments import _episode_curves, train_logged
 
     out_dir = Path(args.out).resolve()
     scenarios = [s.strip() for s in args.scenarios.split(",") if s.strip()]
@@ -112,7 +114,7 @@ def plot(returns_by_run: dict[str, np.ndarray], scenarios: list[str], presets: l
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .experiments import _moving_average
+    from laneshift.studies.experiments import _moving_average
 
     fig, axes = plt.subplots(1, len(scenarios), figsize=(5 * len(scenarios), 4), squeeze=False)
     for ax, scenario in zip(axes[0], scenarios):
@@ -133,7 +135,7 @@ def plot(returns_by_run: dict[str, np.ndarray], scenarios: list[str], presets: l
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from .cli import add_set_arg, comma_list, non_negative_int, positive_int
+    from laneshift.cli import add_set_arg, comma_list, non_negative_int, positive_int
 
     p = subparsers.add_parser("presets", help="reward conditions 1-5 on merge/curve/roundabout (figure 4)")
     p.add_argument("--scenarios", default="merge,curve,roundabout", help="comma-separated scenarios")

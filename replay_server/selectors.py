@@ -1,0 +1,115 @@
+"""How a replay table picks the rows of a sample (Reverb's ``Table(sampler, ...)`` strategy
+objects): ``UniformSelector`` or ``PrioritizedSelector`` (Schaul et al. 2016: a sum tree over
+[demo rows | online rows], new items at the highest priority seen, importance weights). The core
+calls the same five methods whichever it holds, under its lock:
+
+- ``draw(rng, rows, n_demo, online_tail, online_size, online_capacity)`` -> ``Draw``;
+- ``inserted(online_rows)`` / ``dropped(online_rows)``: online items stored / gone;
+- ``demos_off()``: the demo rows leave what is sampled (rehearsal's phase 2);
+- ``update(demo_index, demo_priority, online_rows, online_priority)``: new raw priorities;
+- ``priority_of(leaves)``: the sampling mass of leaves (inspection).
+
+    >>> import numpy as np
+    >>> s = UniformSelector()
+    >>> d = s.draw(np.random.default_rng(0), 4, n_demo=2, online_tail=0, online_size=3, online_capacity=8)
+    >>> d.is_demo.shape, float(d.weight.max())
+    ((4,), 1.0)
+
+Room: replay_server (component). May import: numpy and this package's sum tree.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .sum_tree import SumTree
+
+
+@dataclass(frozen=True)
+class Draw:
+    """Rows drawn for one sample: which are demo rows, their rows in each table, the importance
+    weight of each drawn row (all ones for uniform sampling)."""
+
+    is_demo: np.ndarray  # bool (rows,)
+    demo_rows: np.ndarray  # rows of the demo table
+    online_rows: np.ndarray  # rows of the online ring
+    weight: np.ndarray  # float32 (rows,)
+
+
+class UniformSelector:
+    """Every live item equally likely: the demo region (when sampled) and the online items in
+    the ring from its tail on."""
+
+    prioritized = False
+
+    def draw(self, rng: np.random.Generator, rows: int, n_demo: int, online_tail: int, online_size: int,
+             online_capacity: int) -> Draw:
+        pick = rng.integers(0, n_demo + online_size, size=rows)
+        is_demo = pick < n_demo
+        online_rows = (online_tail + pick[~is_demo] - n_demo) % online_capacity
+        return Draw(is_demo, pick[is_demo], online_rows, np.ones(rows, np.float32))
+
+    def inserted(self, online_rows: np.ndarray) -> None:
+        pass
+
+    def dropped(self, online_rows: np.ndarray) -> None:
+        pass
+
+    def demos_off(self) -> None:
+        pass
+
+    def update(self, demo_index: np.ndarray, demo_priority: np.ndarray, online_rows: np.ndarray,
+               online_priority: np.ndarray) -> int:
+        return 0
+
+    def priority_of(self, leaves: np.ndarray) -> np.ndarray | None:
+        return None
+
+
+class PrioritizedSelector:
+    """P(i) ~ p_i ** alpha over one sum tree of ``demo_size + online_capacity`` leaves; demo
+    leaves start at ``(1 + demo_bonus) ** alpha`` (``none`` has no demo rows at all)."""
+
+    prioritized = True
+
+    def __init__(self, demo_size: int, online_capacity: int, alpha: float, beta: float, demo_bonus: float):
+        self.demo_size, self.alpha, self.beta = demo_size, alpha, beta
+        self.tree = SumTree(demo_size + online_capacity)
+        self.max_priority = 1.0
+        if demo_size:
+            self.tree.set(np.arange(demo_size), np.full(demo_size, (1.0 + demo_bonus) ** alpha))
+
+    def draw(self, rng: np.random.Generator, rows: int, n_demo: int, online_tail: int, online_size: int,
+             online_capacity: int) -> Draw:
+        leaves = self.tree.sample(rng, rows)
+        is_demo = leaves < self.demo_size
+        # Importance weights (N P(i))^-beta, normalised by the batch maximum.
+        prob = self.tree.get(leaves) / self.tree.total
+        weight = (float(n_demo + online_size) * prob) ** -self.beta
+        return Draw(is_demo, leaves[is_demo], leaves[~is_demo] - self.demo_size,
+                    (weight / weight.max()).astype(np.float32))
+
+    def inserted(self, online_rows: np.ndarray) -> None:
+        # New items get the highest priority seen: each is sampled at least once soon.
+        self.tree.set(self.demo_size + online_rows, np.full(len(online_rows), self.max_priority ** self.alpha))
+
+    def dropped(self, online_rows: np.ndarray) -> None:
+        self.tree.set(self.demo_size + online_rows, np.zeros(len(online_rows)))
+
+    def demos_off(self) -> None:
+        if self.demo_size:
+            self.tree.set(np.arange(self.demo_size), np.zeros(self.demo_size))
+
+    def update(self, demo_index: np.ndarray, demo_priority: np.ndarray, online_rows: np.ndarray,
+               online_priority: np.ndarray) -> int:
+        leaves = np.concatenate([demo_index, self.demo_size + online_rows])
+        values = np.concatenate([demo_priority, online_priority])
+        if len(leaves):
+            self.max_priority = max(self.max_priority, float(values.max()))
+            self.tree.set(leaves, values ** self.alpha)
+        return len(leaves)
+
+    def priority_of(self, leaves: np.ndarray) -> np.ndarray:
+        return np.asarray(self.tree.get(leaves), np.float64).copy()

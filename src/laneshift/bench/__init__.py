@@ -1,0 +1,1 @@
+"""Room: the tools (benchmarks). May import: anything in laneshift."""

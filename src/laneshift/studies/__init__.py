@@ -1,0 +1,1 @@
+"""Room: the tools (studies). May import: anything in laneshift."""

@@ -1,0 +1,147 @@
+"""The floors of the house, checked on every import statement in the package (module level and
+inside functions), read with ``ast`` so nothing is imported to check it:
+
+- the contract (``laneshift.{wire, config, transport, envspec, nstep, qnet, progress}`` and the
+  demo shard format ``laneshift.demos.{shard, checksum, envsupport, framestack, outcomes}``)
+  imports nothing but the contract;
+- each component (``laneshift.actors``, ``laneshift.learner``, ``laneshift.replay_server``)
+  imports the contract and itself, never another component, ``deploy`` or a tool;
+- ``laneshift.deploy`` (the builder and the launchers) imports the contract, the components and
+  the demo tools, never the studies, the benchmarks or the CLI;
+- the tools (``laneshift.cli``, ``studies``, ``bench``, the demo tools) may import anything.
+
+``python tests/test_import_graph.py`` prints which floor imports which.
+May import: the standard library and pytest.
+"""
+
+from __future__ import annotations
+
+import ast
+import collections
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+#: Where each package's files are (pyproject.toml's package-dir).
+PACKAGE_DIRS = {"laneshift": "src/laneshift", "laneshift.actors": "actors", "laneshift.learner": "learner",
+                "laneshift.replay_server": "replay_server", "laneshift.deploy": "deploy"}
+CONTRACT = {"laneshift", "laneshift.wire", "laneshift.config", "laneshift.transport", "laneshift.envspec",
+            "laneshift.nstep", "laneshift.qnet", "laneshift.progress", "laneshift.demos", "laneshift.demos.shard",
+            "laneshift.demos.checksum", "laneshift.demos.envsupport", "laneshift.demos.framestack",
+            "laneshift.demos.outcomes"}
+COMPONENTS = ("actors", "learner", "replay_server")
+
+
+def floor(module: str) -> str:
+    """contract | actors | learner | replay_server | deploy | tools"""
+    if module in CONTRACT:
+        return "contract"
+    part = module.split(".")[1] if "." in module else ""
+    if part in COMPONENTS or part == "deploy":
+        return part
+    return "tools"
+
+
+def modules() -> dict[str, Path]:
+    """Every module of the package, by dotted name."""
+    found: dict[str, Path] = {}
+    for package, directory in PACKAGE_DIRS.items():
+        for path in sorted((ROOT / directory).rglob("*.py")):
+            rel = path.relative_to(ROOT / directory).with_suffix("")
+            parts = [p for p in rel.parts if p != "__init__"]
+            name = ".".join([package, *parts])
+            if package == "laneshift" and len(parts) > 0 and parts[0] in {p.split(".")[1] for p in PACKAGE_DIRS if "." in p}:
+                continue  # a remapped package's own dir wins
+            found[name] = path
+    return found
+
+
+def imports_of(name: str, path: Path, known: set[str]) -> set[str]:
+    """The package modules ``path`` imports (``from x import y`` counts ``x.y`` when it is a module)."""
+    is_package = path.name == "__init__.py"
+    here = name if is_package else name.rsplit(".", 1)[0]
+    out: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            targets = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = here.split(".")[: len(here.split(".")) - node.level + 1]
+                module = ".".join(base + ([node.module] if node.module else []))
+            else:
+                module = node.module or ""
+            targets = [module] + [f"{module}.{a.name}" for a in node.names]
+        else:
+            continue
+        for target in targets:
+            if target.startswith("laneshift"):
+                while target not in known and "." in target:  # an attribute, not a module
+                    target = target.rsplit(".", 1)[0]
+                if target in known and target != name:
+                    out.add(target)
+    return out
+
+
+def allowed(importer: str, imported: str) -> bool:
+    a, b = floor(importer), floor(imported)
+    if b == "contract" or a == "tools":
+        return True
+    if a == "contract":
+        return False
+    if a in COMPONENTS:
+        return b == a
+    return a == "deploy" and (b in COMPONENTS or b == "deploy" or imported.startswith("laneshift.demos."))
+
+
+def graph() -> dict[str, set[str]]:
+    mods = modules()
+    return {name: imports_of(name, path, set(mods)) for name, path in mods.items()}
+
+
+def report(g: dict[str, set[str]]) -> str:
+    edges: collections.Counter = collections.Counter()
+    for importer, targets in g.items():
+        for target in targets:
+            edges[(floor(importer), floor(target))] += 1
+    lines = [f"{len(g)} modules; imports between floors (importer -> imported: import statements' targets)"]
+    lines += [f"  {a:>13} -> {b:<13} {n:4d}" for (a, b), n in sorted(edges.items())]
+    return "\n".join(lines)
+
+
+def test_every_import_keeps_to_its_floor():
+    g = graph()
+    assert len(g) > 60 and "laneshift.replay_server.core" in g, "the package's modules were not found"
+    bad = sorted(f"{importer} ({floor(importer)}) imports {target} ({floor(target)})"
+                 for importer, targets in g.items() for target in targets if not allowed(importer, target))
+    assert not bad, "imports across floors:\n" + "\n".join(bad)
+
+
+def test_the_floors_are_what_the_rules_say():
+    assert floor("laneshift.qnet") == "contract" and floor("laneshift.demos.shard") == "contract"
+    assert floor("laneshift.demos.generate") == "tools" and floor("laneshift.studies.experiments") == "tools"
+    assert not allowed("laneshift.actors.policy", "laneshift.learner.dqn")
+    assert not allowed("laneshift.envspec", "laneshift.actors.envs")
+    assert not allowed("laneshift.replay_server.service", "laneshift.deploy.builder")
+    assert not allowed("laneshift.deploy.launch", "laneshift.studies.evaluate")
+    assert allowed("laneshift.deploy.builder", "laneshift.learner.loop")
+    assert allowed("laneshift.studies.experiments", "laneshift.deploy.local")
+
+
+@pytest.mark.parametrize("text, expected", [
+    ("from laneshift.learner.dqn import DoubleDQN", {"laneshift.learner.dqn"}),
+    ("def f():\n    from laneshift.learner import dqn", {"laneshift.learner", "laneshift.learner.dqn"}),
+    ("import laneshift.wire", {"laneshift.wire"}),
+    ("from .frames import FrameStore", {"laneshift.replay_server.frames"}),
+])
+def test_imports_are_found_at_module_level_and_inside_functions(tmp_path, text, expected):
+    path = tmp_path / "x.py"
+    path.write_text(text)
+    known = {"laneshift.learner.dqn", "laneshift.learner", "laneshift.wire", "laneshift.replay_server.frames"}
+    assert imports_of("laneshift.replay_server.x", path, known) == expected
+
+
+if __name__ == "__main__":
+    print(report(graph()))
+    sys.exit(0)
