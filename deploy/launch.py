@@ -15,21 +15,19 @@ in a temp dir, no token, loopback only); cluster mode joins a running cluster (`
 ``RAY_ADDRESS``, ``ray job submit``). SIGTERM and SIGINT end the run gracefully at any moment:
 final learner and replay checkpoints, summary, nothing left running.
 
-May import: the contract, ``deploy``'s own modules, Ray; components only through the builder.
+Its helpers: ``run_dir`` (the run dir's lock, resume/overwrite, the default demo shard),
+``ray_connection`` (the private or the running Ray cluster), ``summary`` (the end of the run).
+
+Room: deploy, the wiring. May import: the contract, ``deploy``'s own modules, Ray; components
+only through the builder.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import fcntl
 import json
-import math
-import os
-import shutil
 import signal
-import subprocess
 import sys
-import tempfile
 import threading
 import time
 from pathlib import Path
@@ -39,9 +37,10 @@ from laneshift.config import RunConfig, save_run_config
 
 from .builder import SERVICES, Builder
 
-
-class LaunchError(RuntimeError):
-    """A run could not start or go on; the message is the one line the user sees."""
+from .errors import LaunchError
+from .ray_connection import RayConnection
+from .run_dir import RunDirLock, default_demo_dir, ensure_demo_shard, prepare_run_dir  # noqa: F401 - re-exported
+from .summary import summarise
 
 
 # ---------------------------------------------------------------------------- signals
@@ -75,220 +74,6 @@ class StopSignals:
     def restore() -> None:
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, signal.SIG_DFL if sig == signal.SIGTERM else signal.default_int_handler)
-
-
-# ---------------------------------------------------------------------------- the run dir
-
-
-class RunDirLock:
-    """One launcher per run dir (``<run dir>/.lock``, released when the process ends, even by kill -9)."""
-
-    def __init__(self, run_dir: Path):
-        self.path = run_dir / ".lock"
-        self._fd: int | None = None
-
-    def acquire(self) -> "RunDirLock":
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
-            os.close(fd)
-            raise LaunchError(f"run dir {self.path.parent} is in use by another `laneshift train` (pid {holder})") from None
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, str(os.getpid()).encode(), 0)
-        self._fd = fd
-        return self
-
-    def release(self) -> None:
-        if self._fd is not None:
-            os.close(self._fd)
-            self._fd = None
-
-
-#: What a run leaves in its run dir that a new run must not silently reuse.
-RUN_STATE = ("config.yaml", "replay_checkpoint", "checkpoints", "summary.json", "replay_stats.json",
-             "metrics.jsonl", "tb", "logs")
-
-
-def prepare_run_dir(run_dir: Path, resume: bool, overwrite: bool, out: TextIO) -> None:
-    used = (run_dir / "config.yaml").exists()
-    if used and not (resume or overwrite):
-        raise LaunchError(f"run dir {run_dir} already holds a run: `--resume {run_dir}` continues it, "
-                          f"--overwrite starts it over, or choose another --run-dir")
-    if resume and not used:
-        raise LaunchError(f"--resume {run_dir}: no run there (no config.yaml)")
-    if overwrite and used:
-        print(f"train: --overwrite: removing the previous run's state in {run_dir}", file=out, flush=True)
-        for name in RUN_STATE:
-            path = run_dir / name
-            shutil.rmtree(path, ignore_errors=True) if path.is_dir() else path.unlink(missing_ok=True)
-
-
-# ---------------------------------------------------------------------------- demo shard
-
-
-def _default_demo_episodes(cfg: RunConfig) -> int:
-    """Scripted episodes for the default shard: ``train.demo_episodes``, else enough for
-    retention's demo region (or 2,000 transitions for rehearsal), at least 20."""
-    from laneshift.actors.envs import make as make_env
-
-    if cfg.train.demo_episodes:
-        return cfg.train.demo_episodes
-    need = cfg.replay.capacity * cfg.replay.demo_ratio if cfg.replay.retains_demos else 2_000
-    probe = make_env(cfg.env)
-    horizon = getattr(probe.unwrapped, "max_steps", None) or 100
-    probe.close()
-    return max(20, math.ceil(1.3 * need / horizon))
-
-
-def default_demo_dir(cfg: RunConfig, episodes: int) -> Path:
-    """Where the default scripted shard lives (shared by runs; its size and the driver's version
-    are in the name, so a run that needs more demos, or a newer driver's, gets a new shard instead
-    of a refusal or stale demos)."""
-    from laneshift.actors.envs.demonstrator import ScriptedDriver
-    from laneshift.actors.envs import spec_of as env_spec
-
-    env = cfg.env
-    # The observation's shape is in the name: a layout change makes a new shard, not a refusal.
-    shape = "x".join(str(d) for d in env_spec(env).schema.obs_shape)
-    name = f"{env.scenario.replace('/', '_')}-{env.observation}{shape}-p{env.reward_preset}-scripted-v{ScriptedDriver.VERSION}-{episodes}ep"
-    return Path(cfg.train.run_dir).resolve().parent / "demos" / name
-
-
-def ensure_demo_shard(cfg: RunConfig, out: TextIO) -> RunConfig:
-    """Demo modes without a shard get the scripted demonstrator's, generated once if absent."""
-    if cfg.replay.demo_mode == "none" or cfg.replay.demo_paths:
-        return cfg
-    episodes = _default_demo_episodes(cfg)
-    path = default_demo_dir(cfg, episodes)
-    if not any(path.glob("**/metadata.json")):
-        from laneshift.demos.generate import generate_shard
-
-        print(f"train: generating the default demo shard ({episodes} scripted episodes) in {path}", file=out, flush=True)
-        generate_shard(path, env_id_or_scenario=cfg.env.scenario, env_kwargs=cfg.env.env_kwargs(),
-                       episodes=episodes, seed=cfg.train.seed + 10_000)
-    return cfg.replace(replay=dataclasses.replace(cfg.replay, demo_paths=(str(path),)))
-
-
-# ---------------------------------------------------------------------------- Ray
-
-
-class RayConnection:
-    """A private local Ray cluster, or a running one joined as a driver. Contacted (and its
-    token checked) before any component starts."""
-
-    def __init__(self, address: str | None):
-        self.address = address
-        self.temp_dir: str | None = None
-        self._reaper: subprocess.Popen | None = None
-
-    def open(self, cfg: RunConfig) -> "RayConnection":
-        if self.address is not None and (os.environ.get("RAY_AUTH_TOKEN") or os.environ.get("RAY_AUTH_TOKEN_PATH")):
-            # A token was given: use it (Ray sends one to an explicit address only in token mode).
-            # Set before Ray reads its auth settings.
-            os.environ.setdefault("RAY_AUTH_MODE", "token")
-        import ray
-
-        if self.address is None:
-            os.environ.pop("RAY_ADDRESS", None)  # --local inside a job: a private cluster all the same
-            os.environ["RAY_AUTH_MODE"] = "disabled"  # loopback-only cluster; keeps ~/.ray untouched
-            os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
-            self.temp_dir = tempfile.mkdtemp(prefix="lsray-")  # short: unix socket paths < 108 chars
-            self._reaper = _temp_dir_reaper(self.temp_dir)
-            d = cfg.deploy
-            cpus = d.router_cpus + d.replay_cpus + d.learner_cpus + cfg.actor.workers * d.worker_cpus
-            resources: dict[str, float] = {}
-            for res in (d.router_resources, d.replay_resources, d.learner_resources):
-                for k, v in res.items():
-                    resources[k] = resources.get(k, 0.0) + v
-            for k, v in d.worker_resources.items():
-                resources[k] = resources.get(k, 0.0) + v * cfg.actor.workers
-            resources.pop("GPU", None)
-            ray.init(num_cpus=max(math.ceil(cpus), 1), resources=resources or None, include_dashboard=False,
-                     _temp_dir=self.temp_dir, _node_ip_address="127.0.0.1", log_to_driver=False,
-                     configure_logging=False)
-            return self
-        if not self.address.startswith("ray://"):
-            _probe_gcs(self.address)
-        try:
-            ray.init(address=self.address, log_to_driver=False, configure_logging=False)
-        except Exception as exc:  # noqa: BLE001 - Ray raises many kinds; the user needs one line
-            raise LaunchError(_ray_connect_error(self.address, exc)) from None
-        return self
-
-    def close(self) -> None:
-        import ray
-
-        if ray.is_initialized():
-            ray.shutdown()
-        if self.temp_dir is not None:
-            shutil.rmtree(self.temp_dir, ignore_errors=True)
-        if self._reaper is not None:
-            self._reaper.terminate()
-            try:
-                self._reaper.wait(5)
-            except subprocess.TimeoutExpired:
-                self._reaper.kill()
-
-
-def _probe_gcs(address: str) -> None:
-    """Reach the cluster's GCS and check this driver's token in about a second, before anything
-    starts (``ray.init`` would print 20 s of InvalidAuthToken warnings, then a long traceback)."""
-    from ray._private.services import canonicalize_bootstrap_address
-    from ray._raylet import GcsClient
-
-    try:
-        gcs = canonicalize_bootstrap_address(address)
-    except Exception as exc:  # noqa: BLE001 - e.g. "auto" with no cluster on this node
-        raise LaunchError(_ray_connect_error(address, exc)) from None
-    if gcs is None:
-        raise LaunchError(f"no running Ray cluster found for --cluster {address} (start one with `ray start --head`, "
-                          f"or name it as HOST:PORT)")
-    try:
-        client = GcsClient(address=gcs)
-        client.internal_kv_get(b"laneshift-probe", namespace=None, timeout=10)
-    except Exception as exc:  # noqa: BLE001
-        raise LaunchError(_ray_connect_error(gcs, exc)) from None
-
-
-def _ray_connect_error(address: str, exc: Exception) -> str:
-    text = f"{type(exc).__name__}: {exc}"
-    if any(s in text for s in ("InvalidAuthToken", "Unauthenticated", "UNAUTHENTICATED", "AuthenticationError")):
-        given = "a wrong token" if os.environ.get("RAY_AUTH_MODE") == "token" else "no token"
-        return (f"Ray at {address} requires its authentication token and this driver sent {given}: set "
-                f"RAY_AUTH_TOKEN (or RAY_AUTH_TOKEN_PATH) to the cluster's token (`ray get-auth-token` on the "
-                f"head prints it; docs/deploy.md), then retry")
-    last = text.strip().splitlines()[-1] if text.strip() else type(exc).__name__
-    return f"cannot connect to Ray at {address}: {last[:300]}"
-
-
-def _temp_dir_reaper(path: str) -> subprocess.Popen:
-    """A tiny watcher that removes the private Ray temp dir if this launcher is killed with -9
-    (Ray's own processes die with it: they are started with the parent-death signal)."""
-    # Ray's dashboard and runtime-env agents do not die with the launcher: the watcher ends every
-    # process that holds a file open under this run's private temp dir (only Ray's, started by us;
-    # their command lines are rewritten to "ray::DashboardAgent", so they are found by their logs).
-    code = ("import os,shutil,signal,sys,time\n"
-            "p,d=int(sys.argv[1]),sys.argv[2]\n"
-            "while os.getppid()==p: time.sleep(0.5)\n"
-            "time.sleep(2)\n"
-            "for _ in range(20):\n"
-            "    left=[]\n"
-            "    for q in os.listdir('/proc'):\n"
-            "        if not q.isdigit() or int(q)==os.getpid(): continue\n"
-            "        try: fds=[os.readlink(f'/proc/{q}/fd/{f}') for f in os.listdir(f'/proc/{q}/fd')]\n"
-            "        except OSError: continue\n"
-            "        if any(f.startswith(d+'/') for f in fds): left.append(int(q))\n"
-            "    if not left: break\n"
-            "    for q in left:\n"
-            "        try: os.kill(q,signal.SIGKILL)\n"
-            "        except OSError: pass\n"
-            "    time.sleep(0.5)\n"
-            "shutil.rmtree(d,ignore_errors=True)\n")
-    return subprocess.Popen([sys.executable, "-c", code, str(os.getpid()), path], stdin=subprocess.DEVNULL,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
 
 
 # ---------------------------------------------------------------------------- progress
@@ -590,74 +375,6 @@ def _not_started(component: str, placement: Any, timeout: float) -> str:
             f"{ {k: round(v, 2) for k, v in sorted(free.items())} } free (deploy.{component.split('-')[0]}_resources)")
 
 
-# ---------------------------------------------------------------------------- summary
-
-
-def _summary(run: Run, why: str, wall: float, out: TextIO) -> dict:
-    cfg, run_dir = run.cfg, Path(run.cfg.train.run_dir)
-    summaries = [run.summaries[n] for n in run.builder.workers if n in run.summaries]
-    last = {**run.progress.last, **(run.learner_final or {})}
-    replay = run.replay_final or {}
-    actors = replay.get("actors", {})
-    steps = sum(s["env_steps"] for s in summaries)
-    episodes = sum(s["episodes"] for s in summaries)
-    total = replay.get("actors_total") or {}  # every actor, evicted ones included
-    lost_batches = int(total.get("lost_batches", sum(int(a.get("lost_batches", 0)) for a in actors.values())))
-    lost_items = int(total.get("lost_items", sum(int(a.get("lost_items", 0)) for a in actors.values())))
-    # Batches a worker sent after the last one the server saw (it ended while the server was
-    # down): no later batch shows their gap, so the worker's own count does.
-    for s in summaries:
-        seen = actors.get(s["name"], {"last_seq": -1, "env_steps": 0})
-        lost_batches += max(0, s["batches"] - 1 - int(seen["last_seq"]))
-        lost_items += max(0, s["env_steps"] - int(seen["env_steps"]))
-    placement = {**{k: {"node_id": v["node_id"], "node_ip": v["node_ip"]} for k, v in run.where.items()},
-                 **{s["name"]: {"node_id": s.get("node"), "node_ip": s.get("node_ip")} for s in summaries}}
-    nodes = sorted({p["node_ip"] for p in placement.values() if p.get("node_ip")})
-    lines = [
-        "", "== laneshift run summary ==",
-        f"scenario        {cfg.env.scenario} ({cfg.env.observation}), demo mode {cfg.replay.demo_mode}, "
-        f"{cfg.train.parallel}, {cfg.actor.workers} workers" + (f"; ended by {why}" if why != "done" else ""),
-        f"env steps       {steps:,} in {wall:.0f} s ({steps / max(wall, 1e-6):.0f} steps/s overall), {episodes} episodes",
-        f"ray nodes       {len(nodes)} ({', '.join(nodes)}): " + ", ".join(
-            f"{k} on {v.get('node_ip')}" for k, v in placement.items()),
-        f"replay          {replay.get('tables', {}).get('online', {}).get('inserted', '-')} items stored, "
-        f"{lost_batches} batches ({lost_items} items) lost and counted",
-        f"restarts        " + (", ".join(f"{k} {v}" for k, v in run.deaths.items()) or "none"),
-        f"learner         {last.get('updates', 0):,} updates, final weights version {last.get('version', 0)}",
-        *([f"stopped early   episode {last['stop_reason']['episode']} returned {last['stop_reason']['return']:.3f}"
-           f" >= train.stop_return {cfg.train.stop_return} after {last['stop_reason']['elapsed_s']} s"]
-          if last.get("stop_reason") else []),
-        f"last 100 eps    return {_fmt(last.get('return_mean'))}, length {_fmt(last.get('length_mean'))}, "
-        f"crash rate {_fmt(last.get('crash_rate'))}",
-    ]
-    final = run_dir / "checkpoints" / "final.safetensors"
-    result: dict = {"workers": summaries, "learner": last, "wall_s": round(wall, 1), "env_steps": steps,
-                    "episodes": episodes, "eval": None, "ended_by": why, "placement": placement,
-                    "restarts": dict(run.deaths),
-                    "replay": {"inserted": replay.get("tables", {}).get("online", {}).get("inserted"),
-                               "lost_batches": lost_batches, "lost_items": lost_items,
-                               "rejected": replay.get("rejected")}}
-    if cfg.train.eval_episodes and final.exists() and why in ("done", "stopped"):
-        from laneshift.actors.evaluation import evaluate_checkpoint, format_result
-
-        result["eval"] = evaluate_checkpoint(final, cfg.env, episodes=cfg.train.eval_episodes,
-                                             seed=cfg.train.seed + 12345)
-        lines.append(f"greedy eval     {format_result(result['eval'])}")
-    lines += [f"run dir         {run_dir}", f"checkpoint      {final}", f"tensorboard     {_tensorboard_command()} --logdir {run_dir / 'tb'}"]
-    print("\n".join(lines), file=out, flush=True)
-    return result
-
-
-def _tensorboard_command() -> str:
-    """``tensorboard`` as the user can run it: the one beside this Python (a venv not activated)."""
-    beside = Path(sys.executable).parent / "tensorboard"
-    return str(beside) if beside.exists() and not shutil.which("tensorboard") else "tensorboard"
-
-
-def _fmt(v: object) -> str:
-    return f"{v:.3f}" if isinstance(v, (int, float)) else "-"
-
-
 # ---------------------------------------------------------------------------- entry point
 
 
@@ -727,7 +444,7 @@ def train(cfg: RunConfig, *, address: str | None = None, out: TextIO = sys.stdou
         run.stop()
         if run.progress.tty:
             out.write("\n")
-        result = _summary(run, why, time.monotonic() - started, out)
+        result = summarise(run, why, time.monotonic() - started, out)
         try:
             (run_dir / "summary.json").write_text(json.dumps(result, indent=2))
         except OSError as exc:  # a full or read-only run dir: the summary above is all there is

@@ -1,0 +1,137 @@
+"""The launcher's Ray: a private local cluster (state in a temp dir, no token, loopback only,
+reaped with the launcher) or a running cluster (``--cluster``, ``RAY_ADDRESS``), with one clear
+line when it cannot be reached.
+
+Room: deploy, the wiring. May import: the contract and Ray.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+
+from laneshift.config import RunConfig
+
+from .errors import LaunchError
+
+
+class RayConnection:
+    """A private local Ray cluster, or a running one joined as a driver. Contacted (and its
+    token checked) before any component starts."""
+
+    def __init__(self, address: str | None):
+        self.address = address
+        self.temp_dir: str | None = None
+        self._reaper: subprocess.Popen | None = None
+
+    def open(self, cfg: RunConfig) -> "RayConnection":
+        if self.address is not None and (os.environ.get("RAY_AUTH_TOKEN") or os.environ.get("RAY_AUTH_TOKEN_PATH")):
+            # A token was given: use it (Ray sends one to an explicit address only in token mode).
+            # Set before Ray reads its auth settings.
+            os.environ.setdefault("RAY_AUTH_MODE", "token")
+        import ray
+
+        if self.address is None:
+            os.environ.pop("RAY_ADDRESS", None)  # --local inside a job: a private cluster all the same
+            os.environ["RAY_AUTH_MODE"] = "disabled"  # loopback-only cluster; keeps ~/.ray untouched
+            os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+            self.temp_dir = tempfile.mkdtemp(prefix="lsray-")  # short: unix socket paths < 108 chars
+            self._reaper = _temp_dir_reaper(self.temp_dir)
+            d = cfg.deploy
+            cpus = d.router_cpus + d.replay_cpus + d.learner_cpus + cfg.actor.workers * d.worker_cpus
+            resources: dict[str, float] = {}
+            for res in (d.router_resources, d.replay_resources, d.learner_resources):
+                for k, v in res.items():
+                    resources[k] = resources.get(k, 0.0) + v
+            for k, v in d.worker_resources.items():
+                resources[k] = resources.get(k, 0.0) + v * cfg.actor.workers
+            resources.pop("GPU", None)
+            ray.init(num_cpus=max(math.ceil(cpus), 1), resources=resources or None, include_dashboard=False,
+                     _temp_dir=self.temp_dir, _node_ip_address="127.0.0.1", log_to_driver=False,
+                     configure_logging=False)
+            return self
+        if not self.address.startswith("ray://"):
+            _probe_gcs(self.address)
+        try:
+            ray.init(address=self.address, log_to_driver=False, configure_logging=False)
+        except Exception as exc:  # noqa: BLE001 - Ray raises many kinds; the user needs one line
+            raise LaunchError(_ray_connect_error(self.address, exc)) from None
+        return self
+
+    def close(self) -> None:
+        import ray
+
+        if ray.is_initialized():
+            ray.shutdown()
+        if self.temp_dir is not None:
+            shutil.rmtree(self.temp_dir, ignore_errors=True)
+        if self._reaper is not None:
+            self._reaper.terminate()
+            try:
+                self._reaper.wait(5)
+            except subprocess.TimeoutExpired:
+                self._reaper.kill()
+
+
+def _probe_gcs(address: str) -> None:
+    """Reach the cluster's GCS and check this driver's token in about a second, before anything
+    starts (``ray.init`` would print 20 s of InvalidAuthToken warnings, then a long traceback)."""
+    from ray._private.services import canonicalize_bootstrap_address
+    from ray._raylet import GcsClient
+
+    try:
+        gcs = canonicalize_bootstrap_address(address)
+    except Exception as exc:  # noqa: BLE001 - e.g. "auto" with no cluster on this node
+        raise LaunchError(_ray_connect_error(address, exc)) from None
+    if gcs is None:
+        raise LaunchError(f"no running Ray cluster found for --cluster {address} (start one with `ray start --head`, "
+                          f"or name it as HOST:PORT)")
+    try:
+        client = GcsClient(address=gcs)
+        client.internal_kv_get(b"laneshift-probe", namespace=None, timeout=10)
+    except Exception as exc:  # noqa: BLE001
+        raise LaunchError(_ray_connect_error(gcs, exc)) from None
+
+
+def _ray_connect_error(address: str, exc: Exception) -> str:
+    text = f"{type(exc).__name__}: {exc}"
+    if any(s in text for s in ("InvalidAuthToken", "Unauthenticated", "UNAUTHENTICATED", "AuthenticationError")):
+        given = "a wrong token" if os.environ.get("RAY_AUTH_MODE") == "token" else "no token"
+        return (f"Ray at {address} requires its authentication token and this driver sent {given}: set "
+                f"RAY_AUTH_TOKEN (or RAY_AUTH_TOKEN_PATH) to the cluster's token (`ray get-auth-token` on the "
+                f"head prints it; docs/deploy.md), then retry")
+    last = text.strip().splitlines()[-1] if text.strip() else type(exc).__name__
+    return f"cannot connect to Ray at {address}: {last[:300]}"
+
+
+def _temp_dir_reaper(path: str) -> subprocess.Popen:
+    """A tiny watcher that removes the private Ray temp dir if this launcher is killed with -9
+    (Ray's own processes die with it: they are started with the parent-death signal)."""
+    # Ray's dashboard and runtime-env agents do not die with the launcher: the watcher ends every
+    # process that holds a file open under this run's private temp dir (only Ray's, started by us;
+    # their command lines are rewritten to "ray::DashboardAgent", so they are found by their logs).
+    code = ("import os,shutil,signal,sys,time\n"
+            "p,d=int(sys.argv[1]),sys.argv[2]\n"
+            "while os.getppid()==p: time.sleep(0.5)\n"
+            "time.sleep(2)\n"
+            "for _ in range(20):\n"
+            "    left=[]\n"
+            "    for q in os.listdir('/proc'):\n"
+            "        if not q.isdigit() or int(q)==os.getpid(): continue\n"
+            "        try: fds=[os.readlink(f'/proc/{q}/fd/{f}') for f in os.listdir(f'/proc/{q}/fd')]\n"
+            "        except OSError: continue\n"
+            "        if any(f.startswith(d+'/') for f in fds): left.append(int(q))\n"
+            "    if not left: break\n"
+            "    for q in left:\n"
+            "        try: os.kill(q,signal.SIGKILL)\n"
+            "        except OSError: pass\n"
+            "    time.sleep(0.5)\n"
+            "shutil.rmtree(d,ignore_errors=True)\n")
+    return subprocess.Popen([sys.executable, "-c", code, str(os.getpid()), path], stdin=subprocess.DEVNULL,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)

@@ -1,0 +1,114 @@
+"""A run's directory before the launch: one launcher per run dir (``RunDirLock``), a run dir
+that already holds a run refused unless ``--resume`` or ``--overwrite`` (``prepare_run_dir``), and
+the default scripted demo shard made once under ``<run dir>/../demos/`` (``ensure_demo_shard``).
+
+Room: deploy, the wiring. May import: the contract, the demo tools, the env (for the demo shard's
+size and name).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import fcntl
+import json
+import math
+import os
+import shutil
+from pathlib import Path
+from typing import TextIO
+
+from laneshift.config import RunConfig
+
+from .errors import LaunchError
+
+
+class RunDirLock:
+    """One launcher per run dir (``<run dir>/.lock``, released when the process ends, even by kill -9)."""
+
+    def __init__(self, run_dir: Path):
+        self.path = run_dir / ".lock"
+        self._fd: int | None = None
+
+    def acquire(self) -> "RunDirLock":
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
+            os.close(fd)
+            raise LaunchError(f"run dir {self.path.parent} is in use by another `laneshift train` (pid {holder})") from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, str(os.getpid()).encode(), 0)
+        self._fd = fd
+        return self
+
+    def release(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+
+
+#: What a run leaves in its run dir that a new run must not silently reuse.
+RUN_STATE = ("config.yaml", "replay_checkpoint", "checkpoints", "summary.json", "replay_stats.json",
+             "metrics.jsonl", "tb", "logs")
+
+
+def prepare_run_dir(run_dir: Path, resume: bool, overwrite: bool, out: TextIO) -> None:
+    used = (run_dir / "config.yaml").exists()
+    if used and not (resume or overwrite):
+        raise LaunchError(f"run dir {run_dir} already holds a run: `--resume {run_dir}` continues it, "
+                          f"--overwrite starts it over, or choose another --run-dir")
+    if resume and not used:
+        raise LaunchError(f"--resume {run_dir}: no run there (no config.yaml)")
+    if overwrite and used:
+        print(f"train: --overwrite: removing the previous run's state in {run_dir}", file=out, flush=True)
+        for name in RUN_STATE:
+            path = run_dir / name
+            shutil.rmtree(path, ignore_errors=True) if path.is_dir() else path.unlink(missing_ok=True)
+
+
+# ---------------------------------------------------------------------------- demo shard
+
+
+def _default_demo_episodes(cfg: RunConfig) -> int:
+    """Scripted episodes for the default shard: ``train.demo_episodes``, else enough for
+    retention's demo region (or 2,000 transitions for rehearsal), at least 20."""
+    from laneshift.actors.envs import make as make_env
+
+    if cfg.train.demo_episodes:
+        return cfg.train.demo_episodes
+    need = cfg.replay.capacity * cfg.replay.demo_ratio if cfg.replay.retains_demos else 2_000
+    probe = make_env(cfg.env)
+    horizon = getattr(probe.unwrapped, "max_steps", None) or 100
+    probe.close()
+    return max(20, math.ceil(1.3 * need / horizon))
+
+
+def default_demo_dir(cfg: RunConfig, episodes: int) -> Path:
+    """Where the default scripted shard lives (shared by runs; its size and the driver's version
+    are in the name, so a run that needs more demos, or a newer driver's, gets a new shard instead
+    of a refusal or stale demos)."""
+    from laneshift.actors.envs.demonstrator import ScriptedDriver
+    from laneshift.actors.envs import spec_of as env_spec
+
+    env = cfg.env
+    # The observation's shape is in the name: a layout change makes a new shard, not a refusal.
+    shape = "x".join(str(d) for d in env_spec(env).schema.obs_shape)
+    name = f"{env.scenario.replace('/', '_')}-{env.observation}{shape}-p{env.reward_preset}-scripted-v{ScriptedDriver.VERSION}-{episodes}ep"
+    return Path(cfg.train.run_dir).resolve().parent / "demos" / name
+
+
+def ensure_demo_shard(cfg: RunConfig, out: TextIO) -> RunConfig:
+    """Demo modes without a shard get the scripted demonstrator's, generated once if absent."""
+    if cfg.replay.demo_mode == "none" or cfg.replay.demo_paths:
+        return cfg
+    episodes = _default_demo_episodes(cfg)
+    path = default_demo_dir(cfg, episodes)
+    if not any(path.glob("**/metadata.json")):
+        from laneshift.demos.generate import generate_shard
+
+        print(f"train: generating the default demo shard ({episodes} scripted episodes) in {path}", file=out, flush=True)
+        generate_shard(path, env_id_or_scenario=cfg.env.scenario, env_kwargs=cfg.env.env_kwargs(),
+                       episodes=episodes, seed=cfg.train.seed + 10_000)
+    return cfg.replace(replay=dataclasses.replace(cfg.replay, demo_paths=(str(path),)))

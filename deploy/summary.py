@@ -1,0 +1,82 @@
+"""The end of ``laneshift train``: the summary lines and result (env steps, episodes, the
+learner's last status, replay losses, restarts, the final greedy evaluation).
+
+Room: deploy, the wiring. May import: the contract and the env-running side's evaluation.
+"""
+
+from __future__ import annotations
+
+import shutil
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING, TextIO
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .launch import Run
+
+
+def summarise(run: Run, why: str, wall: float, out: TextIO) -> dict:
+    """Print the summary lines to ``out``; return the run's result (``train``'s, which the
+    experiments read)."""
+    cfg, run_dir = run.cfg, Path(run.cfg.train.run_dir)
+    summaries = [run.summaries[n] for n in run.builder.workers if n in run.summaries]
+    last = {**run.progress.last, **(run.learner_final or {})}
+    replay = run.replay_final or {}
+    actors = replay.get("actors", {})
+    steps = sum(s["env_steps"] for s in summaries)
+    episodes = sum(s["episodes"] for s in summaries)
+    total = replay.get("actors_total") or {}  # every actor, evicted ones included
+    lost_batches = int(total.get("lost_batches", sum(int(a.get("lost_batches", 0)) for a in actors.values())))
+    lost_items = int(total.get("lost_items", sum(int(a.get("lost_items", 0)) for a in actors.values())))
+    # Batches a worker sent after the last one the server saw (it ended while the server was
+    # down): no later batch shows their gap, so the worker's own count does.
+    for s in summaries:
+        seen = actors.get(s["name"], {"last_seq": -1, "env_steps": 0})
+        lost_batches += max(0, s["batches"] - 1 - int(seen["last_seq"]))
+        lost_items += max(0, s["env_steps"] - int(seen["env_steps"]))
+    placement = {**{k: {"node_id": v["node_id"], "node_ip": v["node_ip"]} for k, v in run.where.items()},
+                 **{s["name"]: {"node_id": s.get("node"), "node_ip": s.get("node_ip")} for s in summaries}}
+    nodes = sorted({p["node_ip"] for p in placement.values() if p.get("node_ip")})
+    lines = [
+        "", "== laneshift run summary ==",
+        f"scenario        {cfg.env.scenario} ({cfg.env.observation}), demo mode {cfg.replay.demo_mode}, "
+        f"{cfg.train.parallel}, {cfg.actor.workers} workers" + (f"; ended by {why}" if why != "done" else ""),
+        f"env steps       {steps:,} in {wall:.0f} s ({steps / max(wall, 1e-6):.0f} steps/s overall), {episodes} episodes",
+        f"ray nodes       {len(nodes)} ({', '.join(nodes)}): " + ", ".join(
+            f"{k} on {v.get('node_ip')}" for k, v in placement.items()),
+        f"replay          {replay.get('tables', {}).get('online', {}).get('inserted', '-')} items stored, "
+        f"{lost_batches} batches ({lost_items} items) lost and counted",
+        f"restarts        " + (", ".join(f"{k} {v}" for k, v in run.deaths.items()) or "none"),
+        f"learner         {last.get('updates', 0):,} updates, final weights version {last.get('version', 0)}",
+        *([f"stopped early   episode {last['stop_reason']['episode']} returned {last['stop_reason']['return']:.3f}"
+           f" >= train.stop_return {cfg.train.stop_return} after {last['stop_reason']['elapsed_s']} s"]
+          if last.get("stop_reason") else []),
+        f"last 100 eps    return {_fmt(last.get('return_mean'))}, length {_fmt(last.get('length_mean'))}, "
+        f"crash rate {_fmt(last.get('crash_rate'))}",
+    ]
+    final = run_dir / "checkpoints" / "final.safetensors"
+    result: dict = {"workers": summaries, "learner": last, "wall_s": round(wall, 1), "env_steps": steps,
+                    "episodes": episodes, "eval": None, "ended_by": why, "placement": placement,
+                    "restarts": dict(run.deaths),
+                    "replay": {"inserted": replay.get("tables", {}).get("online", {}).get("inserted"),
+                               "lost_batches": lost_batches, "lost_items": lost_items,
+                               "rejected": replay.get("rejected")}}
+    if cfg.train.eval_episodes and final.exists() and why in ("done", "stopped"):
+        from laneshift.actors.evaluation import evaluate_checkpoint, format_result
+
+        result["eval"] = evaluate_checkpoint(final, cfg.env, episodes=cfg.train.eval_episodes,
+                                             seed=cfg.train.seed + 12345)
+        lines.append(f"greedy eval     {format_result(result['eval'])}")
+    lines += [f"run dir         {run_dir}", f"checkpoint      {final}", f"tensorboard     {_tensorboard_command()} --logdir {run_dir / 'tb'}"]
+    print("\n".join(lines), file=out, flush=True)
+    return result
+
+
+def _tensorboard_command() -> str:
+    """``tensorboard`` as the user can run it: the one beside this Python (a venv not activated)."""
+    beside = Path(sys.executable).parent / "tensorboard"
+    return str(beside) if beside.exists() and not shutil.which("tensorboard") else "tensorboard"
+
+
+def _fmt(v: object) -> str:
+    return f"{v:.3f}" if isinstance(v, (int, float)) else "-"
