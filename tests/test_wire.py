@@ -1024,3 +1024,10 @@ def test_a_bad_episode_record_is_refused_naming_its_field(body, field):
     with pytest.raises(wire.WireError) as err:
         wire.decode_episode(wire.encode_json(body))
     assert err.value.reason == "bad_value" and field in str(err.value)
+
+
+def test_the_safetensors_encoder_writes_the_packages_own_bytes():
+    rng = np.random.default_rng(0)
+    t = {"net.0.weight": rng.random((4, 3), dtype=np.float32), "net.0.bias": np.ones(4, np.float32),
+         "a": np.arange(3, dtype=np.int64), "scalar": np.array(2.0, np.float32)}
+    assert safetensors_dumps(t, {"version": "7"}) == stn.save(t, metadata={"version": "7"})
