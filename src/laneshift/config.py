@@ -27,7 +27,7 @@ import tomllib
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Literal, Mapping
 
 import yaml
 
@@ -43,30 +43,39 @@ def _check(cond: bool, where: str, msg: str, value: Any) -> None:
         raise ConfigError(f"{where}: {msg}, got {value!r}")
 
 
+def _choices_text(choices: tuple) -> str:
+    return ", ".join(map(str, choices[:-1])) + f" or {choices[-1]}" if len(choices) > 1 else str(choices[0])
+
+
+def _check_choices(obj: Any, section: str) -> None:
+    """Every ``Literal[...]`` field of a config section holds one of its choices."""
+    for name, typ in typing.get_type_hints(type(obj)).items():
+        if typing.get_origin(typ) is Literal:
+            choices = typing.get_args(typ)
+            _check(getattr(obj, name) in choices, f"{section}.{name}", f"must be {_choices_text(choices)}",
+                   getattr(obj, name))
+
+
 @dataclass(frozen=True)
 class EnvConfig:
     """Which environment every actor runs (the env's own kwargs, flat)."""
 
     scenario: str = "straight"  # straight | merge | curve | roundabout | lka, or a full gymnasium id
-    observation: str = "vector"  # vector (fast, CPU default) | grayscale (paper: 4 x 100 x 100)
+    observation: Literal["vector", "grayscale"] = "vector"  # vector (fast, CPU default) | grayscale (paper: 4 x 100 x 100)
     reward_preset: int = 5  # Table 1 condition (lane-change scenarios only)
     max_steps: int = 0  # 0 = the scenario's default episode length
-    initial_lane: str = "random"  # random | non-target
-    action_set: str = "paper"  # paper (9 actions) | meta (highway-env meta-actions)
+    initial_lane: Literal["random", "non-target"] = "random"  # random | non-target
+    action_set: Literal["paper", "meta"] = "paper"  # paper (9 actions) | meta (highway-env meta-actions)
     policy_vehicles: int = 0  # other vehicles driven by a copy of the agent's policy
     # Per-lane gap features in the vector observation (False: the earlier 11 + 7 K layout).
     lane_features: bool = True
 
     def __post_init__(self) -> None:
+        _check_choices(self, "env")
         _check(self.scenario in SCENARIO_NAMES or "/" in self.scenario, "env.scenario",
                f"must be one of {SCENARIO_NAMES} or a gymnasium id", self.scenario)
-        _check(self.observation in ("vector", "grayscale"), "env.observation", "must be vector or grayscale",
-               self.observation)
         _check(1 <= self.reward_preset <= 5, "env.reward_preset", "must be 1..5 (Table 1)", self.reward_preset)
         _check(self.max_steps >= 0, "env.max_steps", "must be >= 0", self.max_steps)
-        _check(self.initial_lane in ("random", "non-target"), "env.initial_lane", "must be random or non-target",
-               self.initial_lane)
-        _check(self.action_set in ("paper", "meta"), "env.action_set", "must be paper or meta", self.action_set)
         _check(self.policy_vehicles >= 0, "env.policy_vehicles", "must be >= 0", self.policy_vehicles)
 
     @property
@@ -95,7 +104,7 @@ class ActorConfig:
     workers: int = 2
     envs_per_worker: int = 1
     send_every: int = 32  # publish a transitions batch every K env steps (MATLAB: "every N steps")
-    exploration: str = "linear"  # linear (paper) | exponential (MATLAB) | apex (per-actor fixed epsilons)
+    exploration: Literal["linear", "exponential", "apex"] = "linear"  # linear (paper) | exponential (MATLAB) | apex (per-actor fixed epsilons)
     epsilon_start: float = 1.0
     epsilon_final: float = 0.1  # paper condition 5: 1.0 -> 0.1
     epsilon_decay_steps: int = 0  # linear: a worker's env steps from start to final; 0 = half its budget
@@ -109,11 +118,10 @@ class ActorConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
+        _check_choices(self, "actor")
         _check(self.workers >= 1, "actor.workers", "must be >= 1", self.workers)
         _check(self.envs_per_worker >= 1, "actor.envs_per_worker", "must be >= 1", self.envs_per_worker)
         _check(self.send_every >= 1, "actor.send_every", "must be >= 1", self.send_every)
-        _check(self.exploration in ("linear", "exponential", "apex"), "actor.exploration",
-               "must be linear, exponential or apex", self.exploration)
         _check(self.phase2_epsilon_start == -1.0 or 0.0 <= self.phase2_epsilon_start <= 1.0,
                "actor.phase2_epsilon_start", "must be -1 (restart at epsilon_start) or in [0, 1]",
                self.phase2_epsilon_start)
@@ -129,7 +137,7 @@ class ActorConfig:
         _check(self.seed >= 0, "actor.seed", "must be >= 0", self.seed)
 
 
-DEMO_MODES = ("none", "retention", "rehearsal", "dqfd")
+DEMO_MODES: tuple[str, ...] = ("none", "retention", "rehearsal", "dqfd")  # ReplayConfig.demo_mode's choices
 
 
 @dataclass(frozen=True)
@@ -139,7 +147,7 @@ class ReplayConfig:
     capacity: int = 100_000  # total items, demo region included (retention)
     # none | retention | rehearsal (the paper's three) | dqfd (beyond the paper, Hester et al. 2018:
     # rehearsal's demo-only phase 1, then retention's fixed demo region in phase 2)
-    demo_mode: str = "none"
+    demo_mode: Literal["none", "retention", "rehearsal", "dqfd"] = "none"
     demo_ratio: float = 0.1  # retention/dqfd: share of the buffer that is demos, never evicted
     # Demo shards (Minari datasets) loaded at start. Empty with a demo mode: `train` generates the
     # scripted demonstrator's shard; a bare replay server refuses to start.
@@ -149,7 +157,7 @@ class ReplayConfig:
     # 256, 32 means one update per 8 env steps; actors wait when the learner falls behind.
     samples_per_insert: float = 32.0
     spi_tolerance: float = 8192.0  # rows of slack either side of the ratio (>= one sample request)
-    sampler: str = "uniform"  # uniform | prioritized (sum tree, Schaul et al. 2016)
+    sampler: Literal["uniform", "prioritized"] = "uniform"  # uniform | prioritized (sum tree, Schaul et al. 2016)
     priority_alpha: float = 0.6  # P(i) ~ p_i ** alpha
     priority_beta: float = 0.4  # importance-sampling exponent (1 = full correction)
     priority_eps: float = 1e-3  # added to |TD error| so no item starves
@@ -170,8 +178,7 @@ class ReplayConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        _check(self.sampler in ("uniform", "prioritized"), "replay.sampler", "must be uniform or prioritized",
-               self.sampler)
+        _check_choices(self, "replay")
         for name in ("priority_alpha", "priority_beta"):
             _check(0.0 <= getattr(self, name) <= 1.0, f"replay.{name}", "must be in [0, 1]", getattr(self, name))
         _check(self.priority_eps > 0, "replay.priority_eps", "must be > 0", self.priority_eps)
@@ -181,8 +188,6 @@ class ReplayConfig:
         _check(self.checkpoint_every_s >= 0, "replay.checkpoint_every_s", "must be >= 0", self.checkpoint_every_s)
         _check(self.actor_idle_evict_s >= 0, "replay.actor_idle_evict_s", "must be >= 0", self.actor_idle_evict_s)
         _check(self.capacity >= 2, "replay.capacity", "must be >= 2", self.capacity)
-        _check(self.demo_mode in DEMO_MODES, "replay.demo_mode", "must be none, retention, rehearsal or dqfd",
-               self.demo_mode)
         _check(0.0 < self.demo_ratio < 1.0, "replay.demo_ratio", "must be in (0, 1)", self.demo_ratio)
         _check(self.min_size >= 1, "replay.min_size", "must be >= 1", self.min_size)
         _check(self.min_size <= self.capacity, "replay.min_size", f"must be <= replay.capacity ({self.capacity}) "
@@ -216,7 +221,7 @@ class LearnerConfig:
     hidden: tuple[int, ...] = (256, 256)  # MLP for vector observations (CNN for grayscale)
     # The CNN for grayscale frames: nature (Mnih et al. 2015) or small (laneshift.qnet SmallCNN,
     # about 3x the updates/s on 2 CPU cores; what the pixel Table 2 runs use).
-    cnn: str = "nature"
+    cnn: Literal["nature", "small"] = "nature"
     target_update_period: int = 500  # updates between hard target-network syncs
     huber_delta: float = 1.0
     grad_clip: float = 10.0  # global-norm gradient clipping (MATLAB threshold: 1)
@@ -236,7 +241,7 @@ class LearnerConfig:
     # Full training state (online + target nets, optimizer, update count, weights version) written
     # at least this often, so a restarted learner loses at most this much work. 0 = only at stop.
     checkpoint_every_s: float = 30.0
-    device: str = "auto"  # auto (cuda when torch sees a GPU) | cpu | cuda
+    device: Literal["auto", "cpu", "cuda"] = "auto"  # auto (cuda when torch sees a GPU) | cpu | cuda
     # Also keep each periodic checkpoint as checkpoints/u<updates>.safetensors (learning curves of
     # greedy scores: `laneshift experiment checkpoints`); off: only latest/final are kept.
     keep_checkpoints: bool = False
@@ -248,8 +253,8 @@ class LearnerConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
+        _check_choices(self, "learner")
         _check(self.lr > 0, "learner.lr", "must be > 0", self.lr)
-        _check(self.cnn in ("nature", "small"), "learner.cnn", "must be nature or small", self.cnn)
         _check(0.0 <= self.gamma <= 1.0, "learner.gamma", "must be in [0, 1]", self.gamma)
         _check(not isinstance(self.n_step, bool) and isinstance(self.n_step, int) and 1 <= self.n_step <= 255,
                "learner.n_step", "must be an int in [1, 255]", self.n_step)
@@ -268,7 +273,6 @@ class LearnerConfig:
         _check(self.bc_loss_weight >= 0, "learner.bc_loss_weight", "must be >= 0", self.bc_loss_weight)
         _check(self.seed >= 0, "learner.seed", "must be >= 0", self.seed)
         _check(self.checkpoint_every_s >= 0, "learner.checkpoint_every_s", "must be >= 0", self.checkpoint_every_s)
-        _check(self.device in ("auto", "cpu", "cuda"), "learner.device", "must be auto, cpu or cuda", self.device)
         _check(-1 <= self.metrics_port <= 65535, "learner.metrics_port", "must be -1 (off), 0 (any free port) or a port",
                self.metrics_port)
 
@@ -306,7 +310,7 @@ class TrainConfig:
     """The run as a whole: budget, parallel mode and where things go."""
 
     env_steps: int = 20_000  # total env steps over all workers (after rehearsal phase 1)
-    parallel: str = "async"  # async | sync (MATLAB parallel training modes)
+    parallel: Literal["async", "sync"] = "async"  # async | sync (MATLAB parallel training modes)
     run_dir: str = "runs/latest"
     log_every_s: float = 2.0
     eval_episodes: int = 10  # greedy episodes in the final summary (0 = skip)
@@ -324,10 +328,10 @@ class TrainConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
+        _check_choices(self, "train")
         _check(self.demo_episodes >= 0, "train.demo_episodes", "must be >= 0 (0 = sized by need)",
                self.demo_episodes)
         _check(self.env_steps >= 1, "train.env_steps", "must be >= 1", self.env_steps)
-        _check(self.parallel in ("async", "sync"), "train.parallel", "must be async or sync", self.parallel)
         _check(self.log_every_s > 0, "train.log_every_s", "must be > 0", self.log_every_s)
         _check(self.eval_episodes >= 0, "train.eval_episodes", "must be >= 0", self.eval_episodes)
         _check(self.eval_every >= 0, "train.eval_every", "must be >= 0 (0 = off)", self.eval_every)
@@ -517,6 +521,8 @@ def _coerce(where: str, typ: Any, value: Any) -> Any:
         if isinstance(value, (str, int, float)) and not isinstance(value, bool):
             return str(value)
         raise ConfigError(f"{where}: must be a string, got {value!r}")
+    if origin is Literal:  # a choice: the section's __post_init__ names the choices if it is none of them
+        return value if isinstance(value, str) else _coerce(where, str, value)
     raise ConfigError(f"{where}: unsupported type {typ}")
 
 
