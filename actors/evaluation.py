@@ -138,10 +138,10 @@ def load_greedy_policy(checkpoint: str | Path) -> Policy:
 
 def evaluate_checkpoint(checkpoint: str | Path, env_cfg: EnvConfig, episodes: int, seed: int = 0,
                         progress: str | None = None) -> dict:
-    from .envs import spec_of as env_spec
+    from .envs import spec_of
 
     ckpt = load_checkpoint_policy(checkpoint)
-    expected = tuple(env_spec(env_cfg).schema.obs_shape)
+    expected = tuple(spec_of(env_cfg).schema.obs_shape)
     if ckpt.obs_shape != expected:
         hint = " (the 67-float vector layout is env.lane_features=false)" if ckpt.obs_shape == (67,) else ""
         raise ValueError(f"checkpoint {checkpoint} was trained on observations of shape {ckpt.obs_shape}, "

@@ -346,13 +346,13 @@ class StatsFlood(threading.Thread):
         import numpy as np
 
         from laneshift import transport, wire
-        from laneshift.actors.envs import spec_of as env_spec
+        from laneshift.actors.envs import spec_of
 
         deadline = time.monotonic() + self.timeout_s
         if not _wait_until(_reached(self.run_dir, self.at_steps), deadline, self._halt):
             return
         cfg = load_run_config(self.run_dir / "config.yaml")  # as the launcher resolved it: the router's endpoint
-        schema = env_spec(cfg.env).schema
+        schema = spec_of(cfg.env).schema
         obs = np.zeros((1, *schema.obs_shape), schema.obs_dtype)
         before, began = logged_env_steps(self.run_dir), time.monotonic()
         with transport.open_session(cfg.transport, "client", cfg.max_message_bytes) as session:

@@ -379,7 +379,7 @@ def _not_started(component: str, placement: Any, timeout: float) -> str:
 
 
 class _SpecThread(threading.Thread):
-    """``env_spec(env)`` on a thread; ``result()`` joins it and returns the spec as a plain dict."""
+    """``spec_of(env)`` on a thread; ``result()`` joins it and returns the spec as a plain dict."""
 
     def __init__(self, env: Any):
         super().__init__(daemon=True, name="env-spec")
@@ -387,11 +387,11 @@ class _SpecThread(threading.Thread):
         self.start()
 
     def run(self) -> None:
-        from laneshift.actors.envs import spec_of as env_spec
+        from laneshift.actors.envs import spec_of
         from laneshift.envspec import spec_to_dict
 
         try:
-            self._spec = spec_to_dict(env_spec(self.env))
+            self._spec = spec_to_dict(spec_of(self.env))
         except Exception as exc:  # noqa: BLE001 - raised again in the caller's thread
             self._error = exc
 

@@ -90,11 +90,11 @@ def default_demo_dir(cfg: RunConfig, episodes: int) -> Path:
     are in the name, so a run that needs more demos, or a newer driver's, gets a new shard instead
     of a refusal or stale demos)."""
     from laneshift.actors.envs.demonstrator import ScriptedDriver
-    from laneshift.actors.envs import spec_of as env_spec
+    from laneshift.actors.envs import spec_of
 
     env = cfg.env
     # The observation's shape is in the name: a layout change makes a new shard, not a refusal.
-    shape = "x".join(str(d) for d in env_spec(env).schema.obs_shape)
+    shape = "x".join(str(d) for d in spec_of(env).schema.obs_shape)
     name = f"{env.scenario.replace('/', '_')}-{env.observation}{shape}-p{env.reward_preset}-scripted-v{ScriptedDriver.VERSION}-{episodes}ep"
     return Path(cfg.train.run_dir).resolve().parent / "demos" / name
 

@@ -165,11 +165,11 @@ class _NoLinks:
 
 
 def test_a_restarted_learner_resumes_its_state_above_every_published_version(tmp_path):
-    from laneshift.actors.envs import spec_of as env_spec
+    from laneshift.actors.envs import spec_of
     from laneshift.learner.loop import Learner
 
     cfg = load_run_config(overrides={"env.scenario": "lka", "train.run_dir": str(tmp_path), "learner.hidden": "16"})
-    spec = env_spec(cfg.env)
+    spec = spec_of(cfg.env)
     first = Learner(cfg, spec, _NoLinks(), threading.Event())
     batch = {"obs": np.zeros((8, *spec.schema.obs_shape), np.float32), "action": np.zeros(8, np.int64),
              "reward": np.ones(8, np.float32), "next_obs": np.zeros((8, *spec.schema.obs_shape), np.float32),
@@ -194,11 +194,11 @@ def torch_equal(a, b) -> bool:
 
 
 def test_learner_checkpoint_on_an_unwritable_path_is_counted_not_fatal(tmp_path):
-    from laneshift.actors.envs import spec_of as env_spec
+    from laneshift.actors.envs import spec_of
     from laneshift.learner.loop import Learner
 
     cfg = load_run_config(overrides={"env.scenario": "lka", "train.run_dir": str(tmp_path), "learner.hidden": "16"})
-    learner = Learner(cfg, env_spec(cfg.env), _NoLinks(), threading.Event())
+    learner = Learner(cfg, spec_of(cfg.env), _NoLinks(), threading.Event())
     (tmp_path / "checkpoints").write_text("a file where the directory should be")  # every write fails
     assert learner.checkpoint("latest") is None
     assert learner.save_state() is False
@@ -207,14 +207,14 @@ def test_learner_checkpoint_on_an_unwritable_path_is_counted_not_fatal(tmp_path)
 
 
 def test_a_second_replay_server_on_the_same_run_dir_is_refused(tmp_path):
-    from laneshift.actors.envs import spec_of as env_spec
+    from laneshift.actors.envs import spec_of
     from laneshift.replay_server.service import ReplayServer
 
     cfg = load_run_config(overrides={"env.scenario": "lka", "train.run_dir": str(tmp_path)})
-    first = ReplayServer(cfg, env_spec(cfg.env))
+    first = ReplayServer(cfg, spec_of(cfg.env))
     first.checkpoint_dir = tmp_path / "replay_checkpoint"
     first._lock_checkpoint_dir()
-    second = ReplayServer(cfg, env_spec(cfg.env))
+    second = ReplayServer(cfg, spec_of(cfg.env))
     second.checkpoint_dir = tmp_path / "replay_checkpoint"
     with pytest.raises(ValueError, match="another replay server is using"):
         second._lock_checkpoint_dir()

@@ -137,12 +137,12 @@ class _RecordingLinks:
 def _worker_items(n_step: int, env_steps: int) -> tuple[dict, list[int]]:
     from laneshift.actors.worker import EnvWorker
     from laneshift.config import ActorConfig, EnvConfig
-    from laneshift.actors.envs import spec_of as env_spec
+    from laneshift.actors.envs import spec_of
     from laneshift.qnet import build_q_network
     from laneshift.qnet import to_wire
 
     env_cfg = EnvConfig(scenario="straight", max_steps=40)  # several episode ends in the run
-    spec = env_spec(env_cfg)
+    spec = spec_of(env_cfg)
     torch.manual_seed(0)
     links = _RecordingLinks(to_wire(build_q_network(spec.schema.obs_shape, spec.schema.n_actions, (16,)), 0, 0, 0))
     links.schema = spec.schema

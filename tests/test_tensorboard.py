@@ -221,10 +221,10 @@ def _episodes_of(env_cfg: EnvConfig, episodes: int):
 
 
 def test_greedy_eval_runs_a_copy_of_the_network_on_its_own_thread():
-    from laneshift.actors.envs import spec_of as env_spec
+    from laneshift.actors.envs import spec_of
 
     env_cfg = EnvConfig(scenario="lka", max_steps=20)
-    schema = env_spec(env_cfg).schema
+    schema = spec_of(env_cfg).schema
     net = build_q_network(schema.obs_shape, schema.n_actions, (8,))
     ev = GreedyEval(_episodes_of(env_cfg, 2), every=100, obs_shape=schema.obs_shape,
                     n_actions=schema.n_actions, hidden=(8,), dueling=False)
@@ -242,10 +242,10 @@ def test_greedy_eval_runs_a_copy_of_the_network_on_its_own_thread():
 
 
 def test_a_running_eval_is_cancelled_at_close():
-    from laneshift.actors.envs import spec_of as env_spec
+    from laneshift.actors.envs import spec_of
 
     env_cfg = EnvConfig(scenario="lka")
-    schema = env_spec(env_cfg).schema
+    schema = spec_of(env_cfg).schema
     ev = GreedyEval(_episodes_of(env_cfg, 10_000), every=1, obs_shape=schema.obs_shape,
                     n_actions=schema.n_actions, hidden=(8,), dueling=False)
     ev.start(build_q_network(schema.obs_shape, schema.n_actions, (8,)), 1)

@@ -347,7 +347,7 @@ class _Bench:
     def start_server(self, name: str, observation: str, capacity: int) -> wire.TransitionSchema:
         from laneshift.config import load_run_config, save_run_config
         from laneshift.deploy.processes import ChildFailed, wait_for_file
-        from laneshift.actors.envs import spec_of as env_spec
+        from laneshift.actors.envs import spec_of
 
         overrides: dict[str, Any] = {
             "env.scenario": "straight", "env.observation": observation, "replay.capacity": capacity,
@@ -367,7 +367,7 @@ class _Bench:
             wait_for_file(ready, 120, self.group, name)
         except ChildFailed as exc:
             raise BenchError(str(exc)) from None
-        return env_spec(cfg.env).schema
+        return spec_of(cfg.env).schema
 
     def stop_server(self, name: str) -> None:
         """SIGKILL: the table is throwaway, and a clean stop would write it to disk as a final

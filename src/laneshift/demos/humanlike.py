@@ -215,9 +215,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--episodes", type=int, default=200)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--scenario", default="straight")
+    parser.add_argument("--initial-lane", choices=("random", "non-target"), default=None,
+                        help="the env's initial_lane (default: the scenario's, random)")
     args = parser.parse_args(argv)
+    kwargs = {"initial_lane": args.initial_lane} if args.initial_lane else {}
     calibrate(args.reaction_steps, args.action_noise, episodes=args.episodes, seed=args.seed,
-              scenario=args.scenario)
+              scenario=args.scenario, env_kwargs=kwargs)
     return 0
 
 
