@@ -82,3 +82,13 @@ def test_train_method_applies_the_named_settings_under_mode_and_set(monkeypatch,
     assert seen.pop("cfg").replay.demo_mode == "retention"  # so does --mode
     assert cli.main(["train", "--method", "dqfq"]) != 0 and "cfg" not in seen
     assert "--method: unknown 'dqfq' (known: none, retention, rehearsal, dqfd, dqfd-bc)" in capsys.readouterr().err
+
+
+def test_the_human_like_stand_in_row_runs_on_the_test_episodes_of_both_lanes():
+    from laneshift.config import EnvConfig
+    from laneshift.studies.experiments import HUMAN_LIKE_ROW, human_like_lanes
+
+    rows = human_like_lanes(EnvConfig(scenario="straight", max_steps=30), episodes=2, seed=100_000)
+    assert set(rows) == {"random", "non-target"} and "stand-in" in HUMAN_LIKE_ROW
+    for lane in rows.values():
+        assert lane["episodes"] == 2 and 0.0 <= lane["achievement_rate"] <= lane["survival_rate"] <= 1.0

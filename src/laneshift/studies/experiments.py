@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from laneshift.config import METHODS, ConfigError, RunConfig, load_run_config, method_settings  # noqa: F401
+from laneshift.config import METHODS, ConfigError, EnvConfig, RunConfig, load_run_config, method_settings  # noqa: F401
 from laneshift.studies.evaluate import INITIAL_LANES, evaluate_lanes, load_greedy_policy, wilson_ci95
 from laneshift.progress import progress, write
 from laneshift.studies.stats import RESAMPLES, bootstrap_ci, curves_on_grid
@@ -93,6 +93,24 @@ def pooled(evals: list[dict], key: str) -> dict:
     return {"rate": k / n if n else 0.0, "ci95": [lo, hi], "episodes": n}
 
 
+#: The stand-in's row name in results.json and the tables (it is not a person's driving).
+HUMAN_LIKE_ROW = "human-like stand-in"
+
+
+def human_like_lanes(env_cfg: EnvConfig, episodes: int, seed: int) -> dict[str, dict]:
+    """The human-like stand-in (scripted driver, reaction delay 5 steps, action noise 0.07) on the
+    test episodes of each initial-lane setting: the same seeds as every method and baseline."""
+    from laneshift.demos.humanlike import DEFAULT_ACTION_NOISE, DEFAULT_REACTION_STEPS, measure
+
+    out = {}
+    for lane in INITIAL_LANES:
+        kwargs = dataclasses.replace(env_cfg, initial_lane=lane).env_kwargs()
+        rates = measure(env_cfg.scenario, kwargs, episodes, seed, DEFAULT_REACTION_STEPS, DEFAULT_ACTION_NOISE)
+        out[lane] = {"episodes": episodes, "survival_rate": rates["survival_rate"] or 0.0,
+                     "achievement_rate": rates["achievement_rate"] or 0.0}
+    return out
+
+
 def run_compare(args: argparse.Namespace) -> dict:
     from laneshift.cli import parse_set
 
@@ -108,7 +126,8 @@ def run_compare(args: argparse.Namespace) -> dict:
                                "eval_episodes": args.eval_episodes, "eval_max_steps": args.eval_max_steps,
                                "methods": {}, "baselines": {}}
     eval_seed = 100_000  # the same evaluation episodes for every method and baseline
-    drivers = ("random", "keep-lane", "scripted") if args.baselines else ()
+    # "human-like": the stand-in for the paper's human driver (laneshift.demos.humanlike; not a person).
+    drivers = ("random", "keep-lane", "scripted", "human-like") if args.baselines else ()
     overall = progress(total=len(configs) + len(drivers), desc="compare", unit="run")
     for method in methods:
         runs = []
@@ -137,8 +156,12 @@ def run_compare(args: argparse.Namespace) -> dict:
         makers = {"random": random_driver, "keep-lane": KeepLaneDriver, "scripted": ScriptedDriver}
         n_base = args.eval_episodes * len(seeds)
         for name in drivers:
-            evals = evaluate_lanes(makers[name], dataclasses.replace(base.env, max_steps=args.eval_max_steps), n_base,
-                                   eval_seed, progress=f"baseline {name}")
+            env_cfg = dataclasses.replace(base.env, max_steps=args.eval_max_steps)
+            if name == "human-like":
+                evals = human_like_lanes(env_cfg, n_base, eval_seed)
+                name = HUMAN_LIKE_ROW
+            else:
+                evals = evaluate_lanes(makers[name], env_cfg, n_base, eval_seed, progress=f"baseline {name}")
             results["baselines"][name] = {lane: {"survival": pooled([e], "survival_rate"),
                                                  "achievement": pooled([e], "achievement_rate")}
                                           for lane, e in evals.items()}
@@ -552,7 +575,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--eval-episodes", type=positive_int, default=200, help="greedy evaluation episodes per seed and initial lane")
     p.add_argument("--eval-max-steps", type=positive_int, default=300, help="evaluation episode length (paper: 300)")
     p.add_argument("--no-baselines", dest="baselines", action="store_false",
-                   help="skip the random, keep-lane and scripted driver baselines")
+                   help="skip the random, keep-lane, scripted and human-like stand-in driver baselines")
     p.add_argument("--out", default="runs/experiment", help="where the runs, results.json, table.md and plots go")
     p.add_argument("--config", help="base config file (YAML/TOML/JSON)")
     add_set_arg(p)
