@@ -4,6 +4,9 @@ run's config, `transport.max_message_mb`) should drop them before they are buffe
 
     .venv/bin/python tests/flood_bench.py 0       # the run's default limit (16 MiB here)
     .venv/bin/python tests/flood_bench.py 1100    # a limit above the messages: what it was before
+
+Room: tests, a helper the tests import or run. May import: laneshift (any floor), pytest, numpy, the
+standard library and what the code under test needs.
 """
 import json, os, subprocess, sys, time, resource
 import zenoh

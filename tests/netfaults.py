@@ -12,6 +12,9 @@
 * ``recovery_after(run_dir, t, steps_at_t)``: seconds from ``t`` to the first record whose env
   steps passed ``steps_at_t``.
 * ``set_link(ns, dev, up)``: ``ip -n NS link set DEV up|down`` (inside a namespace the test made).
+
+Room: tests, a helper the tests import or run. May import: laneshift (any floor), pytest, numpy, the
+standard library and what the code under test needs.
 """
 
 from __future__ import annotations

@@ -1,6 +1,9 @@
 """`laneshift bench learner`: a tiny CPU run through the real CLI parser returns every JSON field,
 and both implementations (DoubleDQN.update and the bare torch loop) update at a positive rate.
-No speed thresholds: speed depends on the machine."""
+No speed thresholds: speed depends on the machine.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs."""
 
 from __future__ import annotations
 

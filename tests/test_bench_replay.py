@@ -1,6 +1,9 @@
 """`laneshift bench replay`: a tiny end-to-end run (real router, replay-server and publisher
 processes) returns every JSON field with sane values, and leaves no process behind. No timing
-thresholds: speed depends on the machine."""
+thresholds: speed depends on the machine.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs."""
 
 from __future__ import annotations
 

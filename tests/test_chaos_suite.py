@@ -3,6 +3,9 @@ control-plane fault against a real 2-worker run; each row must survive with ever
 stored or counted. Long (about 8 minutes here), so behind the ``chaos`` marker:
 
     .venv/bin/python -m pytest -m chaos tests/test_chaos_suite.py
+
+Room: tests, system (real Ray, zenoh or laneshift processes; the `system` marker). May import:
+laneshift (any floor), pytest, numpy, the standard library and what the code under test needs.
 """
 
 from __future__ import annotations

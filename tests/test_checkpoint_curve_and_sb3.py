@@ -1,4 +1,7 @@
-"""Learning curves from kept checkpoints, and the stable-baselines3 baseline on our env."""
+"""Learning curves from kept checkpoints, and the stable-baselines3 baseline on our env.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs."""
 
 from __future__ import annotations
 

@@ -1,4 +1,7 @@
-"""``laneshift.config``: defaults, files (YAML/TOML/JSON), CLI-style overrides, refusals."""
+"""``laneshift.config``: defaults, files (YAML/TOML/JSON), CLI-style overrides, refusals.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs."""
 
 from __future__ import annotations
 

@@ -1,7 +1,10 @@
 """The control plane stays bounded and the run's state knows its owner: stats replies the same
 size for 2 or 4,096 actors, per-actor stats paged, a restarted actor's resume point, sequence
 gaps counted in items, checkpoints refused across runs, the rate limiter not frozen after a
-restore, checkpoint writes that fail on a full disk, and the learner surviving a bad reply."""
+restore, checkpoint writes that fail on a full disk, and the learner surviving a bad reply.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs."""
 
 from __future__ import annotations
 

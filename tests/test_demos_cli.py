@@ -1,4 +1,7 @@
-"""``laneshift demos inspect`` / ``generate`` through the CLI's register() hook."""
+"""``laneshift demos inspect`` / ``generate`` through the CLI's register() hook.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs."""
 
 from __future__ import annotations
 

@@ -2,6 +2,9 @@
 
 Few short episodes on the real straight scenario (vector observations), plus unit checks of the
 delay / noise wrapper around a fake inner driver.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs.
 """
 
 from __future__ import annotations

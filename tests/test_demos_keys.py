@@ -1,4 +1,7 @@
-"""The recorder's keyboard -> paper action mapping (pure functions, no display needed)."""
+"""The recorder's keyboard -> paper action mapping (pure functions, no display needed).
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs."""
 
 from __future__ import annotations
 

@@ -2,6 +2,9 @@
 shards written before these (one constant id, no infos) still loading.
 
 Short episodes of the straight scenario (vector observations) and of LKA.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs.
 """
 
 from __future__ import annotations

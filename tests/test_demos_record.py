@@ -3,6 +3,9 @@
 The scripted events go through pygame's real event queue; the test checks that every stored
 transition carries the action of the keys pressed, that pause / discard / quit behave, and that
 the stored transitions are what the env does with those actions.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs.
 """
 
 from __future__ import annotations

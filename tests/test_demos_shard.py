@@ -3,6 +3,9 @@
 Uses laneshift's LKA env (fast, pure numpy) with a small proportional steering policy, and a
 tiny in-test env whose observations are shifting uint8 frame stacks like highway-env's
 grayscale observation.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs.
 """
 
 from __future__ import annotations

@@ -1,7 +1,10 @@
 """``deploy/ray-cluster.yaml``, the ``ray up`` config: Ray 2.60's own config code accepts it, and its
 commands do what the file says (token auth, torch's CPU wheel, the autoscaler, laneshift's custom
 resources). The commands run here in bash against stand-ins for ``ray`` and ``pip`` that only record
-what they got, so no Ray is started and nothing is installed."""
+what they got, so no Ray is started and nothing is installed.
+
+Room: tests, system (real Ray, zenoh or laneshift processes; the `system` marker). May import:
+laneshift (any floor), pytest, numpy, the standard library and what the code under test needs."""
 
 from __future__ import annotations
 

@@ -1,7 +1,10 @@
 """The KubeRay manifests (``deploy/kuberay/raycluster.yaml``, ``rayjob.yaml``) against
 ``deploy/kuberay/schema.json``, a hand-written JSON schema of the RayCluster/RayJob CRD fields they
 use (KubeRay v1.7.0): both validate, a misspelled or mistyped field does not, and the manifests
-put laneshift's replay server and learner on the head's custom resources."""
+put laneshift's replay server and learner on the head's custom resources.
+
+Room: tests, system (real Ray, zenoh or laneshift processes; the `system` marker). May import:
+laneshift (any floor), pytest, numpy, the standard library and what the code under test needs."""
 
 from __future__ import annotations
 

@@ -4,7 +4,10 @@ DQfD margin and the imitation cross-entropy on demo rows), hand-written global-n
 hand-written Adam with L2 weight decay. Same seed, same start: the optimized update must give the
 same loss, metrics, per-row |TD error|, gradients and parameters (allclose) after a step, for
 three steps in a row (Adam's state carried over, a hard target sync after the second), each step
-started from the same state. CPU, tiny nets, no sleeps."""
+started from the same state. CPU, tiny nets, no sleeps.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs."""
 
 from __future__ import annotations
 

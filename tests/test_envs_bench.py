@@ -1,4 +1,7 @@
-"""`laneshift bench env`: JSON fields and the baseline evaluation (tiny runs)."""
+"""`laneshift bench env`: JSON fields and the baseline evaluation (tiny runs).
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs."""
 
 from __future__ import annotations
 

@@ -1,4 +1,7 @@
-"""Lane-change scenarios: API, determinism, geometry, traffic, policy vehicles, demonstrator."""
+"""Lane-change scenarios: API, determinism, geometry, traffic, policy vehicles, demonstrator.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs."""
 
 from __future__ import annotations
 

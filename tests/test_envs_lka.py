@@ -1,4 +1,7 @@
-"""LaneKeepingAssist-v0: the MATLAB plant, checked against an independent integration."""
+"""LaneKeepingAssist-v0: the MATLAB plant, checked against an independent integration.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs."""
 
 from __future__ import annotations
 

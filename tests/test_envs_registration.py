@@ -1,4 +1,7 @@
-"""Registration: ids, the "module:id" form in a fresh process, SCENARIOS and make_env."""
+"""Registration: ids, the "module:id" form in a fresh process, SCENARIOS and make_env.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs."""
 
 from __future__ import annotations
 

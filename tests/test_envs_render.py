@@ -1,4 +1,7 @@
-"""Grayscale observation: real, non-blank frames centred on the ego vehicle, target lane visible."""
+"""Grayscale observation: real, non-blank frames centred on the ego vehicle, target lane visible.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs."""
 
 from __future__ import annotations
 

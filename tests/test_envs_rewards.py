@@ -1,4 +1,7 @@
-"""Reward presets (Table 1): the pure function and constructed situations in the env."""
+"""Reward presets (Table 1): the pure function and constructed situations in the env.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs."""
 
 from __future__ import annotations
 

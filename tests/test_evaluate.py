@@ -1,4 +1,7 @@
-"""Evaluation: Wilson intervals, rates, and the MATLAB LKA response test."""
+"""Evaluation: Wilson intervals, rates, and the MATLAB LKA response test.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs."""
 
 from __future__ import annotations
 

@@ -1,4 +1,7 @@
-"""The experiment runner end to end at a tiny budget: real training runs, evaluation, table, curves."""
+"""The experiment runner end to end at a tiny budget: real training runs, evaluation, table, curves.
+
+Room: tests, system (real Ray, zenoh or laneshift processes; the `system` marker). May import:
+laneshift (any floor), pytest, numpy, the standard library and what the code under test needs."""
 
 from __future__ import annotations
 

@@ -4,6 +4,9 @@ Each test kills one process with SIGKILL mid-run (found through ``<run dir>/logs
 and checks that the run completes, that the component came back, and that every transition a
 worker made is either stored or counted as lost (``lost_items``), never silently missing. Also:
 the launcher's SIGTERM and SIGKILL, the run-dir lock and refusal, and ``--resume``.
+
+Room: tests, system (real Ray, zenoh or laneshift processes; the `system` marker). May import:
+laneshift (any floor), pytest, numpy, the standard library and what the code under test needs.
 """
 
 from __future__ import annotations

@@ -1,5 +1,8 @@
 """The component graph in one process (threads + in-memory links): fast checks of the worker and
-learner logic, with every message still encoded and decoded by the wire contract."""
+learner logic, with every message still encoded and decoded by the wire contract.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs."""
 
 from __future__ import annotations
 

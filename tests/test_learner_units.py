@@ -1,5 +1,8 @@
 """Learner and actor building blocks: Double DQN updates, weights on the wire and on disk,
-exploration schedules and the epsilon-greedy policy. Tiny nets, CPU, seeded, no sleeps."""
+exploration schedules and the epsilon-greedy policy. Tiny nets, CPU, seeded, no sleeps.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs."""
 
 from __future__ import annotations
 

@@ -19,6 +19,9 @@
 
 Run: ``.venv/bin/python -m pytest -q -s tests/test_network_faults.py`` (the two-host one needs root
 and ``ip netns``; it is skipped with the reason otherwise).
+
+Room: tests, system (real Ray, zenoh or laneshift processes; the `system` marker). May import:
+laneshift (any floor), pytest, numpy, the standard library and what the code under test needs.
 """
 
 from __future__ import annotations

@@ -1,4 +1,7 @@
-"""n-step items: the online accumulator, the whole-shard conversion, and the learner's target."""
+"""n-step items: the online accumulator, the whole-shard conversion, and the learner's target.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs."""
 
 from __future__ import annotations
 

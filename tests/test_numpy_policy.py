@@ -1,5 +1,8 @@
 """The env worker's numpy MLP computes what the learner's torch MLP computes, for plain and
-dueling heads, and an env worker for vector observations never imports torch."""
+dueling heads, and an env worker for vector observations never imports torch.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs."""
 
 from __future__ import annotations
 

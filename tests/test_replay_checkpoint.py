@@ -1,5 +1,8 @@
 """Replay checkpoints: complete items only, written while inserts go on, restored in key order,
-and a kill -9 of the server process loses at most about one checkpoint interval."""
+and a kill -9 of the server process loses at most about one checkpoint interval.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs."""
 
 from __future__ import annotations
 

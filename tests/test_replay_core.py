@@ -2,6 +2,9 @@
 
 Online transitions are built so that ``obs[:, 0]`` equals the item's insertion key and demo
 transitions have ``obs[:, 0] = -(row + 1)``: every sampled row can be traced to where it came from.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs.
 """
 
 from __future__ import annotations

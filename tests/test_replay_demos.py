@@ -1,4 +1,7 @@
-"""Demo shards in the replay server: loaded, validated against the run's env, sampled intact."""
+"""Demo shards in the replay server: loaded, validated against the run's env, sampled intact.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs."""
 
 from __future__ import annotations
 

@@ -3,6 +3,9 @@
 Online items are built so that every column is a function of the item's insertion key (see
 ``tmsg``): any item the API returns can be checked field by field, so a torn read (columns from
 two different items) cannot pass unnoticed.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs.
 """
 
 from __future__ import annotations

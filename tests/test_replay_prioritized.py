@@ -1,4 +1,7 @@
-"""Prioritized sampling: sum tree, importance weights, priority updates, DQfD demo bonus."""
+"""Prioritized sampling: sum tree, importance weights, priority updates, DQfD demo bonus.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs."""
 
 from __future__ import annotations
 

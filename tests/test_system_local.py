@@ -1,6 +1,9 @@
 """The whole system with 2 local workers: real Ray actors, a zenoh router, replay-server and
 learner processes; and once in cluster mode, on a two-node Ray cluster started for the test. Uses
-the LKA plant (fast) so each run takes seconds, not minutes."""
+the LKA plant (fast) so each run takes seconds, not minutes.
+
+Room: tests, system (real Ray, zenoh or laneshift processes; the `system` marker). May import:
+laneshift (any floor), pytest, numpy, the standard library and what the code under test needs."""
 
 from __future__ import annotations
 

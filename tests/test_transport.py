@@ -1,5 +1,8 @@
 """The zenoh transport contract every component relies on: a client behind a router, BLOCK
-back-pressure instead of loss, no shared memory, and a publisher that can wait for its subscriber."""
+back-pressure instead of loss, no shared memory, and a publisher that can wait for its subscriber.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs."""
 
 from __future__ import annotations
 

@@ -12,6 +12,9 @@
 
 Marked ``twohost``; skipped with the reason where namespaces cannot be made (not root, no ``ip``).
 Run: ``.venv/bin/python -m pytest -q -m twohost tests/test_two_host.py -x -s``
+
+Room: tests, system (real Ray, zenoh or laneshift processes; the `system` marker). May import:
+laneshift (any floor), pytest, numpy, the standard library and what the code under test needs.
 """
 
 from __future__ import annotations

@@ -3,6 +3,9 @@ key expressions, and property tests that nothing but ``WireError`` ever escapes 
 
 Everything here is pure (numpy + the standard library + safetensors + hypothesis): no zenoh, no
 torch, no sleeps. Hypothesis runs derandomized without a database, so every run is identical.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs.
 """
 
 from __future__ import annotations

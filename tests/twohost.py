@@ -34,6 +34,9 @@ Every process is started with ``start_new_session=True``; teardown SIGTERMs then
 process groups, kills by PID anything still inside the two namespaces (``ip netns pids``: only
 processes this harness started can be there), deletes the namespaces and the temp dirs, and
 fails if any started process survived. Every wait is bounded in time and in count.
+
+Room: tests, a helper the tests import or run. May import: laneshift (any floor), pytest, numpy, the
+standard library and what the code under test needs.
 """
 
 from __future__ import annotations

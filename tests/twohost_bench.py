@@ -2,6 +2,9 @@
 alternating local, two hosts, local, two hosts. Needs root and `ip netns` (tests/twohost.py).
 
     .venv/bin/python tests/twohost_bench.py [ENV_STEPS]     # prints one JSON line per run, then all
+
+Room: tests, a helper the tests import or run. May import: laneshift (any floor), pytest, numpy, the
+standard library and what the code under test needs.
 """
 import importlib.util, json, subprocess, sys, tempfile, time
 from pathlib import Path
