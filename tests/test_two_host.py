@@ -168,10 +168,15 @@ def _check_run(h, run_dir: Path) -> None:
     assert replay["tables"]["online"]["inserted"] == sent == sum(a["items"] for a in actors.values())
     assert replay.get("rejected", {}) == {}, replay.get("rejected")
 
-    # Weight versions reached host B while the workers acted.
+    # Weight versions reached host B while the workers acted: each worker got weights, and the
+    # workers acted with a learned version (> 0). Not each of them: the rate limiter's slack
+    # (replay.spi_tolerance) lets a worker make its 1,000 steps on version 0 when the learner is
+    # starved of CPU (seen once with the whole suite beside 3 training processes on 2 cores:
+    # w1 [[0, 20]], w0 had later versions).
     for name, w in workers.items():
         assert w["weight_updates"] > 0, (name, w)
-        assert max(v for v, _n in w["version_runs"]) > 0, (name, w["version_runs"])
+    assert max(v for w in workers.values() for v, _n in w["version_runs"]) > 0, \
+        {name: w["version_runs"] for name, w in workers.items()}
 
     # The summary names both nodes: router, replay server and learner on A, workers on B.
     assert "placement" in summary, f"summary.json has no 'placement' (keys: {sorted(summary)})"
