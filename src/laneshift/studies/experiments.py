@@ -522,7 +522,8 @@ def plot_eval_curves(results: dict, out_dir: Path, episodes: dict[str, dict]) ->
         ax.set_ylim(-2, 102)
         ax.grid(alpha=0.3)
     fig.suptitle(f"{results['scenario']}: greedy evaluation during training ({'/'.join(map(str, n))} episodes "
-                 f"each, the same episode seeds every time), mean over seeds, 95 % bootstrap band over seeds", fontsize=10)
+                 f"each, the same episode seeds every time)\nmean over seeds, 95 % bootstrap band over seeds",
+                 fontsize=10)
     fig.tight_layout()
     path = out_dir / "curves_eval.png"
     fig.savefig(path, dpi=100)
