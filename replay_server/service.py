@@ -310,6 +310,10 @@ class ReplayServer:
               f"rejected {sum(final['rejected'].values())}", flush=True)
         return final
 
+    def request_stop(self) -> None:
+        """From a signal handler: ends a wait for the router (``open_session``'s stop) and the HTTP API."""
+        self._stop.set()
+
     def close(self) -> None:
         self._stop.set()
         if getattr(self, "_lock_fd", None) is not None:
@@ -327,7 +331,7 @@ def run_replay_server(cfg: RunConfig, spec: EnvSpec, *, embedded_router: bool = 
 
     def on_signal(*_: object) -> None:
         stop.set()
-        server._stop.set()  # also ends a wait for the router (open_session's stop)
+        server.request_stop()
 
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, on_signal)
