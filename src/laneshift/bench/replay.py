@@ -369,6 +369,19 @@ class _Bench:
             raise BenchError(str(exc)) from None
         return spec_of(cfg.env).schema
 
+    def start_and_fill(self, result: dict, name: str, observation: str, capacity: int,
+                       label: str) -> wire.TransitionSchema:
+        """A replay server for ``observation``, its table filled once by 2 actors (fresh memory
+        pages, so the timed runs after it do not pay for them); ``<observation>_obs`` and
+        ``fill_<observation>`` go into ``result``."""
+        self.say(f"{observation}: starting replay server (capacity {capacity:,})")
+        schema = self.start_server(name, observation, capacity)
+        result[f"{observation}_obs"] = {"shape": list(schema.obs_shape), "dtype": schema.obs_dtype}
+        self.say(f"{observation}: first fill of the table with 2 actors (fresh memory pages)")
+        result[f"fill_{observation}"] = self.ingest(name, schema, label, 2, fill_to=capacity)
+        self.bar.update()
+        return schema
+
     def stop_server(self, name: str) -> None:
         """SIGKILL: the table is throwaway, and a clean stop would write it to disk as a final
         checkpoint (up to 1.6 GB for the grayscale table)."""
@@ -600,12 +613,7 @@ def bench(args: argparse.Namespace, log: TextIO = sys.stderr) -> dict:
         }
 
         # Vector observations: headline ingest (2 actors), actor scaling, sample latency.
-        b.say(f"vector: starting replay server (capacity {args.capacity_vector:,})")
-        vec = b.start_server("benchvec", "vector", args.capacity_vector)
-        result["vector_obs"] = {"shape": list(vec.obs_shape), "dtype": vec.obs_dtype}
-        b.say("vector: first fill of the table with 2 actors (fresh memory pages)")
-        result["fill_vector"] = b.ingest("benchvec", vec, "vf", 2, fill_to=args.capacity_vector)
-        b.bar.update()
+        vec = b.start_and_fill(result, "benchvec", "vector", args.capacity_vector, "vf")
         rows: dict[int, dict] = {}
         for n in scaling:
             b.say(f"vector: ingest with {n} actors for {args.duration:g} s")
@@ -641,12 +649,7 @@ def bench(args: argparse.Namespace, log: TextIO = sys.stderr) -> dict:
         b.stop_server("benchvec")  # frees its memory before the grayscale table
 
         # Grayscale observations: ingest with 2 actors.
-        b.say(f"grayscale: starting replay server (capacity {args.capacity_grayscale:,})")
-        gray = b.start_server("benchgray", "grayscale", args.capacity_grayscale)
-        result["grayscale_obs"] = {"shape": list(gray.obs_shape), "dtype": gray.obs_dtype}
-        b.say("grayscale: first fill of the table with 2 actors (fresh memory pages)")
-        result["fill_grayscale"] = b.ingest("benchgray", gray, "gf", 2, fill_to=args.capacity_grayscale)
-        b.bar.update()
+        gray = b.start_and_fill(result, "benchgray", "grayscale", args.capacity_grayscale, "gf")
         b.say(f"grayscale: ingest with 2 actors for {args.duration:g} s")
         g = b.ingest("benchgray", gray, "g2", 2)
         b.bar.update()
