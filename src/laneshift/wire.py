@@ -663,10 +663,8 @@ def decode_episode(data: bytes | bytearray | memoryview) -> EpisodeRecord:
         value = body.get(name, default)
         if value is None:
             raise WireError("bad_value", f"episode record: {name!r} is required")
-        ok = (isinstance(value, bool) if kind is bool else
-              isinstance(value, (int, float)) and not isinstance(value, bool) if kind is float else
-              isinstance(value, int) and not isinstance(value, bool) if kind is int else isinstance(value, kind))
-        if not ok:
+        accepted = (int, float) if kind is float else kind  # a JSON number may come without a point
+        if not isinstance(value, accepted) or isinstance(value, bool) and kind is not bool:  # as _require
             raise WireError("bad_value", f"episode record: {name!r} must be {kind.__name__}, got {value!r}")
         if kind is float and not math.isfinite(value):
             raise WireError("bad_value", f"episode record: {name!r} must be finite, got {value!r}")
