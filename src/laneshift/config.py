@@ -21,6 +21,7 @@ component, deploy or a tool.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
 import tomllib
@@ -47,13 +48,18 @@ def _choices_text(choices: tuple) -> str:
     return ", ".join(map(str, choices[:-1])) + f" or {choices[-1]}" if len(choices) > 1 else str(choices[0])
 
 
+@functools.cache
+def _literal_fields(cls: type) -> tuple[tuple[str, tuple], ...]:
+    """A config section's ``Literal[...]`` fields and their choices (read once per class)."""
+    return tuple((name, typing.get_args(typ)) for name, typ in typing.get_type_hints(cls).items()
+                 if typing.get_origin(typ) is Literal)
+
+
 def _check_choices(obj: Any, section: str) -> None:
     """Every ``Literal[...]`` field of a config section holds one of its choices."""
-    for name, typ in typing.get_type_hints(type(obj)).items():
-        if typing.get_origin(typ) is Literal:
-            choices = typing.get_args(typ)
-            _check(getattr(obj, name) in choices, f"{section}.{name}", f"must be {_choices_text(choices)}",
-                   getattr(obj, name))
+    for name, choices in _literal_fields(type(obj)):
+        _check(getattr(obj, name) in choices, f"{section}.{name}", f"must be {_choices_text(choices)}",
+               getattr(obj, name))
 
 
 @dataclass(frozen=True)
