@@ -171,9 +171,7 @@ class ReplayCore:
                 return None
             tail = self.online.tail
             keys = self.online.insert(batch, self.actor_index[batch.actor])
-            if self.online.tail > tail:  # items gone (frame tables: maybe not overwritten yet)
-                self.selector.dropped(np.arange(tail, self.online.tail) % self.online.capacity)
-            self.selector.inserted(self.online.rows_of(keys))
+            self.selector.stored(self.online, tail, keys)
             stats["stored"] += len(batch)
             self._rates.add("inserts", len(batch))
         return None

@@ -4,7 +4,9 @@ objects): ``UniformSelector`` or ``PrioritizedSelector`` (Schaul et al. 2016: a 
 calls the same five methods whichever it holds, under its lock:
 
 - ``draw(rng, rows, n_demo, online_tail, online_size, online_capacity)`` -> ``Draw``;
-- ``inserted(online_rows)`` / ``dropped(online_rows)``: online items stored / gone;
+- ``stored(online, tail_before, keys)``: an insert into the online table (which items came,
+  which went: from ``tail_before`` to its tail); the uniform selector ignores it, so the ingest
+  path computes no rows for it;
 - ``demos_off()``: the demo rows leave what is sampled (rehearsal's phase 2);
 - ``update(demo_index, demo_priority, online_rows, online_priority)``: new raw priorities;
 - ``priority_of(leaves)``: the sampling mass of leaves (inspection).
@@ -21,6 +23,7 @@ Room: replay_server (component). May import: numpy and this package's sum tree.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -51,10 +54,7 @@ class UniformSelector:
         online_rows = (online_tail + pick[~is_demo] - n_demo) % online_capacity
         return Draw(is_demo, pick[is_demo], online_rows, np.ones(rows, np.float32))
 
-    def inserted(self, online_rows: np.ndarray) -> None:
-        pass
-
-    def dropped(self, online_rows: np.ndarray) -> None:
+    def stored(self, online: Any, tail_before: int, keys: np.ndarray) -> None:
         pass
 
     def demos_off(self) -> None:
@@ -90,6 +90,11 @@ class PrioritizedSelector:
         weight = (float(n_demo + online_size) * prob) ** -self.beta
         return Draw(is_demo, leaves[is_demo], leaves[~is_demo] - self.demo_size,
                     (weight / weight.max()).astype(np.float32))
+
+    def stored(self, online: Any, tail_before: int, keys: np.ndarray) -> None:
+        if online.tail > tail_before:  # items gone (frame tables: maybe not overwritten yet)
+            self.dropped(np.arange(tail_before, online.tail) % online.capacity)
+        self.inserted(online.rows_of(keys))
 
     def inserted(self, online_rows: np.ndarray) -> None:
         # New items get the highest priority seen: each is sampled at least once soon.
