@@ -41,7 +41,6 @@ import socket
 import threading
 import time
 
-import numpy as np
 import uvicorn
 from fastapi import FastAPI, HTTPException, Query
 from fastapi.responses import Response
