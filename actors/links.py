@@ -23,13 +23,17 @@ ACK_EVERY = 16
 
 
 class ZenohActorLinks:
-    def __init__(self, session: zenoh.Session, run_id: str, name: str, timeout_s: float = 5.0):
+    def __init__(self, session: zenoh.Session, run_id: str, name: str, timeout_s: float = 5.0, shards: int = 1):
         self.session, self.run_id, self.timeout_s = session, run_id, timeout_s
-        self._transitions = transport.data_publisher(session, wire.transitions_key(run_id, name))
+        # This worker's replay server: the run's one, or with replay.shards > 1 the shard its name
+        # routes to (wire.shard_of), always the same, so a restarted worker finds its state there.
+        self.shard = wire.shard_of(name, shards)
+        replay = self.replay_ns = wire.replay_namespace(run_id, self.shard, shards)
+        self._transitions = transport.data_publisher(session, wire.transitions_key(replay, name))
         self._episodes = transport.data_publisher(session, wire.episodes_key(run_id, name))
         self._weights = transport.LatestValue(session, wire.weights_key(run_id))
         self._stop = transport.StopSignal(session, wire.control_key(run_id))
-        self._flow = transport.LatestValue(session, wire.replay_flow_key(run_id))
+        self._flow = transport.LatestValue(session, wire.replay_flow_key(replay))
         self._insert_ok = True
         self._last_query = 0.0
         self.name = name
@@ -41,11 +45,11 @@ class ZenohActorLinks:
         self._weights_wait = transport.WaitLines(
             name, f"the learner's weights on {wire.weights_key(run_id)} (router {router})", "got the learner's weights")
         self._flow_wait = transport.WaitLines(
-            name, f"the replay server to allow inserts on {wire.replay_flow_key(run_id)} (rate limiter; "
+            name, f"the replay server to allow inserts on {wire.replay_flow_key(replay)} (rate limiter; "
                   f"router {router})", "the replay server allows inserts again")
         self._replay_wait = transport.WaitLines(
-            name, f"the replay server on {wire.replay_control_key(run_id)} (router {router})",
-            f"the replay server answered on {wire.replay_control_key(run_id)}")
+            name, f"the replay server on {wire.replay_control_key(replay)} (router {router})",
+            f"the replay server answered on {wire.replay_control_key(replay)}")
 
     def send_transitions(self, batch: wire.TransitionBatch) -> None:
         payload = wire.encode_transitions(batch)
@@ -62,7 +66,7 @@ class ZenohActorLinks:
     def stored_state(self) -> dict[str, int] | None:
         """What the replay server stored of this worker: ``{"env_steps", "next_seq"}`` (zeros for
         a worker it never saw), or None when it did not answer. A restarted worker resumes there."""
-        reply = transport.query(self.session, wire.replay_control_key(self.run_id),
+        reply = transport.query(self.session, wire.replay_control_key(self.replay_ns),
                                 wire.encode_json({"cmd": "actor_state", "actor": self.name}), self.timeout_s)
         if reply is None:
             self._replay_wait.missed()

@@ -150,10 +150,12 @@ class RouterActor(_Service):
 class ReplayServerActor(_Service):
     component = "replay-server"
 
-    def __init__(self, plain: dict):
+    def __init__(self, plain: dict, shard: int = 0):
+        if shard:  # shard i of a sharded replay logs as replay-server-<i> (Builder.replay_servers)
+            self.component = f"replay-server-{shard}"
         cfg = self._begin(plain)
         self.cfg = cfg
-        self.server = Builder(cfg, self.spec).replay_server()
+        self.server = Builder(cfg, self.spec).replay_server(shard)
         self.started = self.server.start()  # restores its checkpoint after a crash
         self.final: dict | None = None
 
@@ -162,7 +164,7 @@ class ReplayServerActor(_Service):
         host = self.cfg.replay.http_host
         shown = self.where["node_ip"] if host in ("0.0.0.0", "::") else host
         return {**self.where, "http_url": f"http://{shown}:{port}" if port else None,
-                "restored_items": self.started.get("restored", 0)}
+                "restored_items": self.started.get("restored", 0), "shard": self.server.shard}
 
     def stats(self) -> dict:
         return self.server.core.stats()

@@ -22,8 +22,11 @@ from typing import Any
 from laneshift.config import RunConfig, worker_budgets, worker_names
 from laneshift.envspec import EnvSpec
 
-#: The run's services, in start order (each one's clients need the ones before it).
-SERVICES = ("router", "replay-server", "learner")
+
+def replay_server_names(shards: int) -> list[str]:
+    """``["replay-server"]`` for one shard; ``replay-server``, ``replay-server-1``, ... for more."""
+    return ["replay-server", *(f"replay-server-{i}" for i in range(1, shards))]
+
 
 #: The cluster-mode router port when ``deploy.router_port`` is 0 (zenoh's usual port).
 CLUSTER_ROUTER_PORT = 7447
@@ -80,17 +83,23 @@ class Builder:
 
         return Router(listen, self.cfg.max_message_bytes)
 
-    def replay_core(self):
+    def replay_core(self, shard: int = 0):
         """The replay tables and rules alone (the in-process mode drives it directly)."""
         from laneshift.replay_server.service import build_core
 
-        return build_core(self.cfg, self.spec)
+        return build_core(self.cfg, self.spec, shard)
 
-    def replay_server(self):
-        """Core + zenoh service + HTTP API, as one server with start()/stop()."""
+    @property
+    def replay_servers(self) -> list[str]:
+        """The replay servers' component names: ``replay-server``, then ``replay-server-1`` ... for
+        the other shards of a sharded replay (``replay.shards``)."""
+        return replay_server_names(self.cfg.replay.shards)
+
+    def replay_server(self, shard: int = 0):
+        """Core + zenoh service + HTTP API, as one server with start()/stop() (shard ``shard``)."""
         from laneshift.replay_server.service import ReplayServer
 
-        return ReplayServer(self.cfg, self.spec)
+        return ReplayServer(self.cfg, self.spec, shard=shard)
 
     def learner(self, links, stop: threading.Event):
         from laneshift.learner.loop import Learner
@@ -125,7 +134,8 @@ class Builder:
     def actor_links(self, session, name: str):
         from laneshift.actors.links import ZenohActorLinks
 
-        return ZenohActorLinks(session, self.cfg.transport.run_id, name, self.cfg.transport.timeout_s)
+        return ZenohActorLinks(session, self.cfg.transport.run_id, name, self.cfg.transport.timeout_s,
+                               self.cfg.replay.shards)
 
     # ------------------------------------------------------------------ where each component runs
 
@@ -134,8 +144,8 @@ class Builder:
         d, run = self.cfg.deploy, self.cfg.transport.run_id
         if component == "router":
             return Placement(f"{run}-router", d.router_cpus, 0.0, d.router_resources, d.max_restarts, 2)
-        if component == "replay-server":
-            return Placement(f"{run}-replay-server", d.replay_cpus, 0.0, d.replay_resources, d.max_restarts, 4)
+        if component in self.replay_servers:
+            return Placement(f"{run}-{component}", d.replay_cpus, 0.0, d.replay_resources, d.max_restarts, 4)
         if component == "learner":
             res = dict(d.learner_resources)
             gpus = float(res.pop("GPU", 0.0))  # Ray takes GPUs as num_gpus, not as a custom resource

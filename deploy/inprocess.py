@@ -2,8 +2,10 @@
 
 What it is: the in-process runner. The components come from the same ``deploy.builder.Builder``
 as in local and cluster mode; only where they run differs: workers and the learner are threads
-talking through in-memory links to a ReplayCore. Every message still goes through the wire
-encoder and decoder, so the contract is exercised as in a real run.
+talking through in-memory links to a ReplayCore (one per shard with ``replay.shards`` > 1, each
+worker sending to its shard and the learner sampling all through ``learner.shards.ShardedReplay``,
+as over zenoh). Every message still goes through the wire encoder and decoder, so the contract is
+exercised as in a real run.
 May import: the contract and ``deploy.builder``.
 
     >>> from laneshift.config import load_run_config
@@ -29,7 +31,7 @@ from .builder import Builder
 class Board:
     """What the zenoh router carries in a real run: the newest weights, episodes, stop."""
 
-    core: Any  # laneshift.replay_server.core.ReplayCore
+    cores: list  # laneshift.replay_server.core.ReplayCore, one per replay shard
     stop: threading.Event = field(default_factory=threading.Event)
     cond: threading.Condition = field(default_factory=threading.Condition)
     weights: bytes = b""
@@ -40,10 +42,11 @@ class Board:
 class InProcessActorLinks:
     def __init__(self, board: Board, name: str):
         self.board, self.name = board, name
+        self.core = board.cores[wire.shard_of(name, len(board.cores))]  # this worker's replay shard
         self._seen = b""
 
     def send_transitions(self, batch: wire.TransitionBatch) -> None:
-        self.board.core.ingest(wire.encode_transitions(batch), self.name)  # the wire's bytes, as over zenoh
+        self.core.ingest(wire.encode_transitions(batch), self.name)  # the wire's bytes, as over zenoh
 
     def send_episode(self, record: wire.EpisodeRecord) -> None:
         self.board.episodes.append(wire.encode_episode(record))
@@ -62,28 +65,51 @@ class InProcessActorLinks:
         return self.latest_weights()
 
     def wait_insert_ok(self) -> None:
-        while not self.board.core.insert_allowed() and not self.board.stop.wait(0.001):
+        while not self.core.insert_allowed() and not self.board.stop.wait(0.001):
             pass
 
     def stop_requested(self) -> bool:
         return self.board.stop.is_set()
 
 
-class InProcessLearnerLinks:
-    def __init__(self, board: Board, schema: wire.TransitionSchema):
-        self.board, self.schema = board, schema
+class InProcessReplay:
+    """A ``ReplayClient`` for one in-memory ReplayCore (requests and replies as wire bytes)."""
+
+    def __init__(self, core: Any, schema: wire.TransitionSchema):
+        self.core, self.schema = core, schema
 
     def sample(self, req: wire.SampleRequest) -> wire.SampledBatch | wire.WireError | None:
-        reply = self.board.core.handle_sample_query(wire.encode_sample_request(req))
+        reply = self.core.handle_sample_query(wire.encode_sample_request(req))
         if wire.peek_kind(reply) == wire.Kind.ERROR:
             return wire.decode_error(reply)
         return wire.decode_batch(reply, self.schema)
 
+    def send_priorities(self, payload: bytes) -> None:
+        self.core.handle_priorities(payload)
+
     def replay_stats(self) -> dict | None:
-        return self.board.core.stats()
+        return self.core.stats()
 
     def replay_control(self, body: dict) -> dict | None:
-        return self.board.core.handle_control(body)
+        return self.core.handle_control(body)
+
+
+class InProcessLearnerLinks:
+    def __init__(self, board: Board, schema: wire.TransitionSchema, beta: float = 0.4, seed: int = 0):
+        from laneshift.learner.shards import ShardedReplay
+
+        self.board, self.schema = board, schema
+        shards = [InProcessReplay(core, schema) for core in board.cores]
+        self.replay = shards[0] if len(shards) == 1 else ShardedReplay(shards, beta=beta, seed=seed)
+
+    def sample(self, req: wire.SampleRequest) -> wire.SampledBatch | wire.WireError | None:
+        return self.replay.sample(req)
+
+    def replay_stats(self) -> dict | None:
+        return self.replay.replay_stats()
+
+    def replay_control(self, body: dict) -> dict | None:
+        return self.replay.replay_control(body)
 
     def publish_weights(self, payload: bytes) -> None:
         with self.board.cond:
@@ -91,7 +117,7 @@ class InProcessLearnerLinks:
             self.board.cond.notify_all()
 
     def send_priorities(self, payload: bytes) -> None:
-        self.board.core.handle_priorities(payload)
+        self.replay.send_priorities(payload)
 
     def publish_stats(self, payload: bytes) -> None:
         self.board.learner_stats = wire.decode_json(payload)
@@ -112,9 +138,10 @@ class InProcessLearnerLinks:
 def train_inprocess(cfg: RunConfig) -> dict:
     """Run workers and learner as threads until the env-step budget is spent; returns a summary."""
     builder = Builder(cfg)
-    board = Board(core=builder.replay_core())
+    board = Board(cores=[builder.replay_core(i) for i in range(cfg.replay.shards)])
     learner_stop = threading.Event()
-    learner = builder.learner(InProcessLearnerLinks(board, builder.spec.schema), learner_stop)
+    links = InProcessLearnerLinks(board, builder.spec.schema, cfg.replay.priority_beta, cfg.learner.seed)
+    learner = builder.learner(links, learner_stop)
     learner_thread = threading.Thread(target=learner.run, name="learner", daemon=True)
     learner_thread.start()
     names, share = builder.workers, builder.budgets
@@ -135,5 +162,8 @@ def train_inprocess(cfg: RunConfig) -> dict:
     learner_stop.set()
     board.stop.set()
     learner_thread.join(timeout=60)
-    return {"workers": [summaries[n] for n in names if n in summaries], "replay": board.core.stats(all_actors=True),
+    from laneshift.replay_stats import merge_replay_stats
+
+    replay = merge_replay_stats([core.stats(all_actors=True) for core in board.cores], all_actors=True)
+    return {"workers": [summaries[n] for n in names if n in summaries], "replay": replay,
             "learner": board.learner_stats, "updates": learner.agent.updates, "version": learner.version}

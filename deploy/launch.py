@@ -35,7 +35,7 @@ from typing import Any, TextIO
 
 from laneshift.config import RunConfig, save_run_config
 
-from .builder import SERVICES, Builder
+from .builder import Builder
 
 from .errors import LaunchError
 from .ray_connection import RayConnection
@@ -177,31 +177,37 @@ class Run:
         save_run_config(cfg, Path(cfg.train.run_dir) / "config.yaml")
         plain = {**cfg.to_dict(), "env_spec": self.env_spec}
         # The rest start together (each retries until the ones it needs answer): faster than in turn.
-        self._create("replay-server", ReplayServerActor, plain)
+        replay_servers = self.builder.replay_servers
+        for shard, name in enumerate(replay_servers):
+            self._create(name, ReplayServerActor, plain, shard)
         self._create("learner", LearnerActor, plain)
         worker_plain = plain
         if cfg.deploy.worker_router:  # workers reach the router through a relay or proxy
             worker_plain = cfg.replace(transport=dataclasses.replace(cfg.transport, router=cfg.deploy.worker_router)).to_dict()
         for i, name in enumerate(self.builder.workers):
             self._create(name, EnvWorkerActor, worker_plain, i)
-        self._await_started(["router", "replay-server", "learner", *self.builder.workers])
+        self._await_started(["router", *replay_servers, "learner", *self.builder.workers])
         self.timeline["rest"] = time.monotonic() - began - self.timeline["router"]
-        for name in SERVICES:
+        for name in ("router", *replay_servers, "learner"):
             self.refs[name] = self.handles[name].run.remote()
         for name, share in zip(self.builder.workers, self.builder.budgets):
             self.refs[name] = self.handles[name].run.remote(share, 0)
         self._say(f"train: run dir {cfg.train.run_dir}; {cfg.actor.workers} workers on {cfg.env.scenario} "
                   f"({cfg.env.observation}), demo mode {cfg.replay.demo_mode}, {cfg.train.parallel}, "
                   f"budget {cfg.train.env_steps:,} env steps; zenoh router {endpoint}")
-        http = self.where["replay-server"].get("http_url")
-        if http:
-            self._say(f"train: replay inspection API {http}/stats on node {self.where['replay-server']['node_ip']} "
-                      f"(or: laneshift replay inspect --router {endpoint} --run-id {cfg.transport.run_id})")
+        for shard, name in enumerate(replay_servers):
+            http = self.where[name].get("http_url")
+            if http:
+                which = f"shard {shard}/{len(replay_servers)} " if len(replay_servers) > 1 else ""
+                self._say(f"train: replay {which}inspection API {http}/stats on node {self.where[name]['node_ip']} "
+                          f"(or: laneshift replay inspect --router {endpoint} --run-id {cfg.transport.run_id}"
+                          + (f" --shard {shard})" if len(replay_servers) > 1 else ")"))
         learner = self.where["learner"]
         if learner.get("metrics_url"):
             self._say(f"train: learner metrics (Prometheus) {learner['metrics_url']}")
-        self._say(f"train: router on {self.where['router']['node_ip']}, replay server on "
-                  f"{self.where['replay-server']['node_ip']}, learner on {learner['node_ip']}")
+        replay_where = (f"replay server on {self.where['replay-server']['node_ip']}" if len(replay_servers) == 1
+                        else ", ".join(f"{n} on {self.where[n]['node_ip']}" for n in replay_servers))
+        self._say(f"train: router on {self.where['router']['node_ip']}, {replay_where}, learner on {learner['node_ip']}")
 
     # -- supervise
 
@@ -329,11 +335,16 @@ class Run:
                     self.learner_final = ray.get(self.refs["learner"], timeout=graceful_s)
             except ray.exceptions.RayError as exc:
                 self._say(f"train: learner did not stop cleanly: {_cause(exc)}")
-        if "replay-server" in self.handles:
+        finals = []
+        for name in (n for n in self.builder.replay_servers if n in self.handles):
             try:
-                self.replay_final = ray.get(self.handles["replay-server"].stop.remote(), timeout=graceful_s)
+                finals.append(ray.get(self.handles[name].stop.remote(), timeout=graceful_s))
             except ray.exceptions.RayError as exc:
-                self._say(f"train: replay server did not stop cleanly: {_cause(exc)}")
+                self._say(f"train: {name} did not stop cleanly: {_cause(exc)}")
+        if finals:  # the run's replay as one (a sharded replay: every shard's counters summed)
+            from laneshift.replay_stats import merge_replay_stats
+
+            self.replay_final = merge_replay_stats(finals, all_actors=True)
         if "router" in self.handles:
             try:
                 ray.get(self.handles["router"].stop.remote(), timeout=10)

@@ -44,11 +44,13 @@ class RayConnection:
             self.temp_dir = tempfile.mkdtemp(prefix="lsray-")  # short: unix socket paths < 108 chars
             self._reaper = _temp_dir_reaper(self.temp_dir)
             d = cfg.deploy
-            cpus = d.router_cpus + d.replay_cpus + d.learner_cpus + cfg.actor.workers * d.worker_cpus
+            cpus = (d.router_cpus + cfg.replay.shards * d.replay_cpus + d.learner_cpus
+                    + cfg.actor.workers * d.worker_cpus)
             resources: dict[str, float] = {}
-            for res in (d.router_resources, d.replay_resources, d.learner_resources):
+            for res, count in ((d.router_resources, 1), (d.replay_resources, cfg.replay.shards),
+                               (d.learner_resources, 1)):
                 for k, v in res.items():
-                    resources[k] = resources.get(k, 0.0) + v
+                    resources[k] = resources.get(k, 0.0) + v * count
             for k, v in d.worker_resources.items():
                 resources[k] = resources.get(k, 0.0) + v * cfg.actor.workers
             resources.pop("GPU", None)

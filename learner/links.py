@@ -1,7 +1,8 @@
 """The learner's seams (Acme style): the same Learner runs over zenoh or in-process.
 
 - ``ReplayClient``: ``sample(SampleRequest)`` -> SampledBatch, a WireError (not ready / rate
-  limited) or None; ``send_priorities(bytes)``; ``replay_stats()`` / ``replay_control(body)``;
+  limited) or None; ``send_priorities(bytes)``; ``replay_stats()`` / ``replay_control(body)``
+  (one replay server: ``ZenohReplayShard``; several: ``shards.ShardedReplay`` over one each);
 - ``WeightsPublisher``: ``publish_weights(bytes)`` (safetensors with a version, ``laneshift.qnet``);
 - ``RunChannel``: ``take_episodes()`` (the workers' episode records, as sent: the learner
   validates and counts them), ``publish_stats(bytes)``, ``stop_requested()``, ``stop_all()``.
@@ -19,6 +20,8 @@ import zenoh
 
 from laneshift import transport, wire
 from laneshift.config import RunConfig
+
+from .shards import ShardedReplay
 
 T = TypeVar("T")
 
@@ -51,8 +54,52 @@ class LearnerLinks(ReplayClient, WeightsPublisher, RunChannel, Protocol):
     """All three seams, as one object (what the builder hands the learner)."""
 
 
+class ZenohReplayShard:
+    """A ``ReplayClient`` for one replay server over zenoh: its keys are built from ``namespace``
+    (the run id, or ``<run>/shard-<i>``: ``wire.replay_namespace``)."""
+
+    def __init__(self, session: zenoh.Session, namespace: str, schema: wire.TransitionSchema, timeout_s: float,
+                 router: str):
+        self.session, self.namespace, self.schema, self.timeout = session, namespace, schema, timeout_s
+        self._priorities = transport.data_publisher(session, wire.priorities_key(namespace))
+        # No answer from the replay server (not started yet, restarting, another run_id) is said in
+        # one line after a few seconds, every 30 s while it lasts, and once when it answers.
+        self.replay_wait = transport.WaitLines(
+            "learner", f"the replay server on {wire.sample_key(namespace)} (router {router})",
+            f"the replay server answered on {wire.sample_key(namespace)} (router {router})")
+
+    def _answered(self, reply: T) -> T:
+        """Note whether the replay server answered (any reply, an ERROR too, is an answer)."""
+        if reply is None:
+            self.replay_wait.missed()
+        else:
+            self.replay_wait.answered()
+        return reply
+
+    def sample(self, req: wire.SampleRequest) -> wire.SampledBatch | wire.WireError | None:
+        reply = self._answered(transport.query_ok(self.session, wire.sample_key(self.namespace),
+                                                  wire.encode_sample_request(req), self.timeout))
+        if reply is None or isinstance(reply, wire.WireError):
+            return reply
+        return wire.decode_batch(reply, self.schema)
+
+    def replay_stats(self) -> dict | None:
+        reply = self._answered(transport.query(self.session, wire.replay_stats_key(self.namespace), b"",
+                                               self.timeout))
+        return _json_or_none(reply)
+
+    def replay_control(self, body: dict) -> dict | None:
+        reply = self._answered(transport.query(self.session, wire.replay_control_key(self.namespace),
+                                               wire.encode_json(body), self.timeout))
+        return _json_or_none(reply)
+
+    def send_priorities(self, payload: bytes) -> None:
+        self._priorities.put(payload)
+
+
 class ZenohLearnerLinks:
-    """LearnerLinks over zenoh: queries to the replay server, weights published with BLOCK."""
+    """LearnerLinks over zenoh: queries to the replay server (or, with ``replay.shards`` > 1, to
+    every shard through ``ShardedReplay``), weights published with BLOCK."""
 
     def __init__(self, session: zenoh.Session, cfg: RunConfig, schema: wire.TransitionSchema,
                  stop: threading.Event):
@@ -68,44 +115,27 @@ class ZenohLearnerLinks:
                                                   lambda s: self._episodes.append(s.payload.to_bytes()))
         self._stop = transport.StopSignal(session, wire.control_key(self.run_id))
         self._stats_pub = session.declare_publisher(wire.learner_stats_key(self.run_id))
-        self._priorities = transport.data_publisher(session, wire.priorities_key(self.run_id))
-        # No answer from the replay server (not started yet, restarting, another run_id) is said in
-        # one line after a few seconds, every 30 s while it lasts, and once when it answers.
-        router = cfg.transport.router
-        self.replay_wait = transport.WaitLines(
-            "learner", f"the replay server on {wire.sample_key(self.run_id)} (router {router})",
-            f"the replay server answered on {wire.sample_key(self.run_id)} (router {router})")
-
-    def _answered(self, reply: T) -> T:
-        """Note whether the replay server answered (any reply, an ERROR too, is an answer)."""
-        if reply is None:
-            self.replay_wait.missed()
-        else:
-            self.replay_wait.answered()
-        return reply
+        n = cfg.replay.shards
+        shards = [ZenohReplayShard(session, wire.replay_namespace(self.run_id, i, n), schema, self.timeout,
+                                   cfg.transport.router) for i in range(n)]
+        self.replay: ReplayClient = shards[0] if n == 1 else ShardedReplay(
+            shards, beta=cfg.replay.priority_beta, seed=cfg.learner.seed)
 
     def sample(self, req: wire.SampleRequest) -> wire.SampledBatch | wire.WireError | None:
-        reply = self._answered(transport.query_ok(self.session, wire.sample_key(self.run_id),
-                                                  wire.encode_sample_request(req), self.timeout))
-        if reply is None or isinstance(reply, wire.WireError):
-            return reply
-        return wire.decode_batch(reply, self.schema)
+        return self.replay.sample(req)
 
     def replay_stats(self) -> dict | None:
-        reply = self._answered(transport.query(self.session, wire.replay_stats_key(self.run_id), b"", self.timeout))
-        return _json_or_none(reply)
+        return self.replay.replay_stats()
 
     def replay_control(self, body: dict) -> dict | None:
-        reply = self._answered(transport.query(self.session, wire.replay_control_key(self.run_id),
-                                               wire.encode_json(body), self.timeout))
-        return _json_or_none(reply)
+        return self.replay.replay_control(body)
+
+    def send_priorities(self, payload: bytes) -> None:
+        self.replay.send_priorities(payload)
 
     def publish_weights(self, payload: bytes) -> None:
         self._latest = payload
         self._pub.put(payload)
-
-    def send_priorities(self, payload: bytes) -> None:
-        self._priorities.put(payload)
 
     def publish_stats(self, payload: bytes) -> None:
         self._stats_pub.put(payload)

@@ -385,6 +385,8 @@ class Learner:
             **{k: self.last_update.get(k) for k in METRIC_NAMES},
             "replay_size": self.replay_stats.get("tables", {}).get("online", {}).get("size"),
             "demo_share_samples": self.replay_stats.get("demo_share_recent_samples"),
+            # A sharded replay: rows drawn but cut when a shard refused its part (learner/shards.py).
+            "sample_rows_discarded": self.replay_stats.get("sharded_sampling", {}).get("discarded_rows", 0),
             "version_lag": {a: self.version - int(s.get("last_version", 0)) for a, s in actors.items()},
             "elapsed_s": round(now - self.started, 1), "stop_reason": self.stop_reason,
         }

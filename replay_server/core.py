@@ -275,6 +275,11 @@ class ReplayCore:
             drawn = self.selector.draw(self._rng, rows, n_demo, self.online.tail, n_online, self.online.capacity)
             is_demo = drawn.is_demo
             batch = self._gather(is_demo, drawn.demo_rows, drawn.online_rows, req.num_batches, drawn.weight)
+            # How many items this draw was over (and, prioritized, their mass and the weights'
+            # scale): a learner sampling several shards weighs each by these (learner/shards.py).
+            batch.info["live"] = n_demo + n_online
+            if self.prioritized:
+                batch.info.update(mass=drawn.mass, weight_scale=drawn.scale)
             if not demo_only:
                 self.samples += rows
             self.sampled_rows += rows
@@ -448,6 +453,7 @@ class ReplayCore:
                     "demo": {"size": self.demo.size, "held": self.demo_held.size, "sha256": self.demo_held.sha256,
                              "bytes": self.demo_held.nbytes},
                 },
+                "demo_in_buffer": demo_in_buffer,  # demo items sampled over now (merged over shards)
                 "demo_share_buffer": (demo_in_buffer / total) if total and self.mode != "none" else 0.0,
                 "demo_share_recent_samples": recent_demo / recent_rows if recent_rows else 0.0,
                 "sampled_rows": self.sampled_rows,

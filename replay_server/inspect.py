@@ -11,6 +11,7 @@ import time
 
 from laneshift import transport, wire
 from laneshift.config import TransportConfig
+from laneshift.replay_stats import merge_replay_stats
 
 
 def render(stats: dict) -> str:
@@ -31,6 +32,9 @@ def render(stats: dict) -> str:
     for name, a in sorted(stats["actors"].items()):
         lines.append(f"{name:<10}{a['batches']:>9,}{a['items']:>10,}{a['stored']:>10,}{a['lost_batches']:>6}"
                      f"{a['last_version']:>9}{a['env_steps']:>11,}")
+    for shard in stats.get("shards", []):  # a sharded replay: one line per shard
+        lines.append(f"shard {shard['shard']}: {shard['online_size']:,} items, {shard['inserted']:,} inserted, "
+                     f"{shard['actors']} actors, HTTP API {shard.get('http_url') or 'off'}")
     total = stats.get("actors_total")
     if total:
         more = total["count"] - len(stats["actors"])
@@ -42,15 +46,24 @@ def render(stats: dict) -> str:
 
 def inspect_main(args: argparse.Namespace) -> int:
     cfg = TransportConfig(router=args.router, run_id=args.run_id)
+    shards = getattr(args, "shards", 1)
+    one = getattr(args, "shard", None)
+    if one is not None and not 0 <= one < shards:
+        print(f"--shard {one}: the run has --shards {shards} (0 to {shards - 1})")
+        return 2
+    wanted = [one] if one is not None else list(range(shards))
+    keys = [wire.replay_stats_key(wire.replay_namespace(cfg.run_id, i, shards)) for i in wanted]
     with transport.open_session(cfg) as session:
         while True:
-            reply = transport.query(session, wire.replay_stats_key(cfg.run_id), b"", cfg.timeout_s)
-            if reply is None:
-                print(f"no replay server answered on {wire.replay_stats_key(cfg.run_id)} via {cfg.router}")
+            replies = [transport.query(session, key, b"", cfg.timeout_s) for key in keys]
+            missing = [key for key, reply in zip(keys, replies) if reply is None]
+            if missing:
+                print(f"no replay server answered on {', '.join(missing)} via {cfg.router}")
                 if not args.watch:
                     return 1
             else:
-                stats = wire.decode_json(reply)
+                # A sharded replay reads as one (every shard's counters summed, replay_stats.py).
+                stats = merge_replay_stats([wire.decode_json(r) for r in replies])
                 print(json.dumps(stats, indent=2) if args.json else render(stats), flush=True)
             if not args.watch:
                 return 0

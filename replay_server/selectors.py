@@ -39,6 +39,11 @@ class Draw:
     demo_rows: np.ndarray  # rows of the demo table
     online_rows: np.ndarray  # rows of the online ring
     weight: np.ndarray  # float32 (rows,)
+    # What a learner sampling several shards needs to turn each shard's weights into the weights
+    # of one draw over all of them (learner/shards.py): the largest (N P(i))^-beta before the
+    # normalisation, and the total priority mass sampled over (both 1 / 0 for uniform sampling).
+    scale: float = 1.0
+    mass: float = 0.0
 
 
 class UniformSelector:
@@ -88,8 +93,9 @@ class PrioritizedSelector:
         # Importance weights (N P(i))^-beta, normalised by the batch maximum.
         prob = self.tree.get(leaves) / self.tree.total
         weight = (float(n_demo + online_size) * prob) ** -self.beta
+        scale = float(weight.max())
         return Draw(is_demo, leaves[is_demo], leaves[~is_demo] - self.demo_size,
-                    (weight / weight.max()).astype(np.float32))
+                    (weight / scale).astype(np.float32), scale, float(self.tree.total))
 
     def stored(self, online: Any, tail_before: int, keys: np.ndarray) -> None:
         if online.tail > tail_before:  # items gone (frame tables: maybe not overwritten yet)

@@ -191,22 +191,33 @@ class ReplayService:
         return [t.name for t in self._threads if t.is_alive()]
 
 
-def build_core(cfg: RunConfig, spec: EnvSpec) -> ReplayCore:
-    """The replay core for a run: schema from the env's spec, demo shards validated against it."""
+def build_core(cfg: RunConfig, spec: EnvSpec, shard: int = 0) -> ReplayCore:
+    """The replay core for a run (or for shard ``shard`` of a sharded replay: its share of the
+    capacity, ``ReplayConfig.shard``): schema from the env's spec, demo shards validated against it."""
     demo = None
     if cfg.replay.demo_paths:  # demos become the same n-step items the actors send
         demo = load_demo_table(cfg.replay.demo_paths, spec, cfg.learner.n_step, cfg.learner.gamma)
-    return ReplayCore(cfg.replay, spec.schema, demo)
+    return ReplayCore(cfg.replay.shard(shard), spec.schema, demo)
 
 
-def config_digest(cfg: RunConfig) -> str:
-    """What a replay checkpoint must match to be restored: the env and the table layout.
-    (Not the router endpoint or ports: those change when a run is resumed.)"""
+def config_digest(cfg: RunConfig, shard: int = 0) -> str:
+    """What a replay checkpoint must match to be restored: the env and the table layout (a
+    shard's checkpoint: that shard of that many). (Not the router endpoint or ports: those change
+    when a run is resumed.)"""
     import hashlib
 
     key = {"env": cfg.to_dict()["env"], "capacity": cfg.replay.capacity, "demo_mode": cfg.replay.demo_mode,
            "demo_ratio": cfg.replay.demo_ratio, "n_step": cfg.learner.n_step}
+    if cfg.replay.shards > 1:  # a single server's digest stays what it was: its checkpoints restore
+        key["shard"] = [shard, cfg.replay.shards]
     return hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def shard_files(cfg: RunConfig, shard: int = 0) -> tuple[str, str]:
+    """A replay server's checkpoint directory and final-stats file names in the run dir:
+    ``replay_checkpoint`` and ``replay_stats.json``, with ``_shard<i>`` when sharded."""
+    tag = f"_shard{shard}" if cfg.replay.shards > 1 else ""
+    return f"replay_checkpoint{tag}", f"replay_stats{tag}.json"
 
 
 class ReplayServer:
@@ -217,8 +228,10 @@ class ReplayServer:
     the Ray actor (``deploy.actors``) both run this.
     """
 
-    def __init__(self, cfg: RunConfig, spec: EnvSpec, embedded_router: bool = False):
-        self.cfg, self.spec, self.embedded_router = cfg, spec, embedded_router
+    def __init__(self, cfg: RunConfig, spec: EnvSpec, embedded_router: bool = False, shard: int = 0):
+        self.cfg, self.spec, self.embedded_router, self.shard = cfg, spec, embedded_router, shard
+        self.namespace = wire.replay_namespace(cfg.transport.run_id, shard, cfg.replay.shards)  # ValueError: named
+        self.who = "replay-server" if cfg.replay.shards == 1 else f"replay-server shard {shard}/{cfg.replay.shards}"
         self.http_port: int | None = None
         self.restored = 0
         self._stop = threading.Event()
@@ -226,43 +239,46 @@ class ReplayServer:
 
     def start(self) -> dict:
         cfg = self.cfg
-        self.core = core = build_core(cfg, self.spec)  # ValueError: config or shard mismatch, named
-        core.identity = {"run_id": cfg.transport.run_id, "config_digest": config_digest(cfg)}
+        self.core = core = build_core(cfg, self.spec, self.shard)  # ValueError: config or shard mismatch, named
+        core.identity = {"run_id": cfg.transport.run_id, "config_digest": config_digest(cfg, self.shard)}
         self.demo_digest = core.demo.digest()
-        self.checkpoint_dir = Path(cfg.train.run_dir) / "replay_checkpoint"
+        checkpoint_name, self.stats_name = shard_files(cfg, self.shard)
+        self.checkpoint_dir = Path(cfg.train.run_dir) / checkpoint_name
         self._lock_checkpoint_dir()
         if cfg.replay.restore and (self.checkpoint_dir / "meta.json").exists():
             self.restored = restore_checkpoint(core, self.checkpoint_dir)  # CheckpointError: named
-            print(f"replay-server: restored {self.restored} items from {self.checkpoint_dir}", flush=True)
+            print(f"{self.who}: restored {self.restored} items from {self.checkpoint_dir}", flush=True)
         transport.use_service_runtime()
         mode = "router" if self.embedded_router else "client"
-        session = transport.open_session(cfg.transport, mode, cfg.max_message_bytes, who="replay-server",
+        session = transport.open_session(cfg.transport, mode, cfg.max_message_bytes, who=self.who,
                                          stop=self._stop)
         try:
             ingest_session = transport.open_session(cfg.transport, "client", cfg.max_message_bytes,
-                                                    who="replay-server", stop=self._stop)
+                                                    who=self.who, stop=self._stop)
         except BaseException:
-            transport.close_sessions([session], timeout_s=10.0, who="replay-server")
+            transport.close_sessions([session], timeout_s=10.0, who=self.who)
             raise
         self._sessions = [ingest_session, session]
-        self.service = ReplayService(core, session, cfg.transport.run_id, self.checkpoint_dir,
+        # Every replay key of this server is built from its namespace: the run id, or <run>/shard-<i>.
+        self.service = ReplayService(core, session, self.namespace, self.checkpoint_dir,
                                      cfg.replay.checkpoint_every_s, ingest_session).start()
-        if cfg.replay.http_port >= 0:
+        port = core.cfg.http_port  # this shard's (ReplayConfig.shard: the fixed port + shard index)
+        if port >= 0:
             from .http_api import serve_http  # imported only when asked for: fastapi takes a while
 
             try:
-                _, self.http_port = serve_http(core, cfg.replay.http_host, cfg.replay.http_port, self._stop)
+                _, self.http_port = serve_http(core, cfg.replay.http_host, port, self._stop)
             except OSError as exc:
                 self.close()
-                raise OSError(f"replay.http_port {cfg.replay.http_port}: {exc}") from None
+                raise OSError(f"replay.http_port {port}: {exc}") from None
             shown = cfg.replay.http_host
             if shown in ("0.0.0.0", "::"):  # bound everywhere: name an address others can use
                 shown = cfg.transport.router.split("/", 1)[1].rsplit(":", 1)[0]
             core.http_url = f"http://{shown}:{self.http_port}"
-            print(f"replay-server: HTTP inspection API on http://{cfg.replay.http_host}:{self.http_port} "
+            print(f"{self.who}: HTTP inspection API on http://{cfg.replay.http_host}:{self.http_port} "
                   f"(/stats, /metrics, /docs)", flush=True)
         stats = core.stats()
-        print(f"replay-server: serving run {cfg.transport.run_id!r} on {cfg.transport.router} "
+        print(f"{self.who}: serving run {cfg.transport.run_id!r} on {cfg.transport.router} "
               f"(mode {core.mode}, online capacity {core.online.capacity}, demo items {core.demo.size}, "
               f"demo sha256 {stats['tables']['demo']['sha256'][:12] or '-'})", flush=True)
         return {"http_port": self.http_port, "restored": self.restored}
@@ -272,7 +288,7 @@ class ReplayServer:
         one's checkpoint. The lock goes with the process (kill -9 included), so a restart gets it."""
         import fcntl
 
-        path = self.checkpoint_dir.with_name("replay_checkpoint.lock")
+        path = self.checkpoint_dir.with_name(self.checkpoint_dir.name + ".lock")
         path.parent.mkdir(parents=True, exist_ok=True)
         fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
         try:
@@ -289,24 +305,24 @@ class ReplayServer:
         self.service.stop()
         final_ckpt = self.service.checkpoint()
         if final_ckpt:
-            print(f"replay-server: final checkpoint of {final_ckpt['items']} items in {final_ckpt['seconds']} s",
+            print(f"{self.who}: final checkpoint of {final_ckpt['items']} items in {final_ckpt['seconds']} s",
                   flush=True)
         self.close()
         # No thread of ours may still be inside a zenoh call when the interpreter finalizes (see
         # cli._end_service_process); the sessions are closed, so their channels have woken them.
         left = self.service.join(timeout_s=10.0)
         if left:
-            print(f"replay-server: threads still running after the sessions closed: {', '.join(left)}",
+            print(f"{self.who}: threads still running after the sessions closed: {', '.join(left)}",
                   file=sys.stderr, flush=True)
         final = self.core.stats(all_actors=True)  # a file, not a reply: every actor
         final["demo_digest_start"], final["demo_digest_end"] = self.demo_digest, self.core.demo.digest()
-        out = Path(self.cfg.train.run_dir) / "replay_stats.json"
+        out = Path(self.cfg.train.run_dir) / self.stats_name
         try:
             out.parent.mkdir(parents=True, exist_ok=True)
             out.write_text(json.dumps(final, indent=2))
         except OSError as exc:
-            print(f"replay-server: could not write {out}: {exc}", file=sys.stderr, flush=True)
-        print(f"replay-server: stopped; stored {final['tables']['online']['inserted']} items, "
+            print(f"{self.who}: could not write {out}: {exc}", file=sys.stderr, flush=True)
+        print(f"{self.who}: stopped; stored {final['tables']['online']['inserted']} items, "
               f"rejected {sum(final['rejected'].values())}", flush=True)
         return final
 
@@ -320,14 +336,18 @@ class ReplayServer:
             os.close(self._lock_fd)
             self._lock_fd = None
         sessions, self._sessions = self._sessions, []
-        transport.close_sessions(sessions, timeout_s=10.0, who="replay-server")
+        transport.close_sessions(sessions, timeout_s=10.0, who=self.who)
 
 
 def run_replay_server(cfg: RunConfig, spec: EnvSpec, *, embedded_router: bool = False,
-                      ready_file: str | None = None) -> int:
+                      ready_file: str | None = None, shard: int = 0) -> int:
     """Serve until SIGINT/SIGTERM. Writes ``ready_file`` (JSON) once it is serving."""
     stop = threading.Event()
-    server = ReplayServer(cfg, spec, embedded_router)
+    try:
+        server = ReplayServer(cfg, spec, embedded_router, shard)
+    except ValueError as exc:  # a shard index out of range
+        print(f"replay-server: {exc}", file=sys.stderr)
+        return 2
 
     def on_signal(*_: object) -> None:
         stop.set()

@@ -163,7 +163,7 @@ def test_retention_regions_and_demo_share():
         check_rows_traceable(core, b)
         demo_rows += int(b.is_demo.sum())
         total += len(b.is_demo)
-        assert b.info == {"phase": 0, "prioritized": False}
+        assert b.info == {"phase": 0, "prioritized": False, "live": 1000}
     share = demo_rows / total  # 51,200 rows: standard error 0.0013
     assert abs(share - 0.1) < 0.01, share
     s = core.stats()
@@ -206,7 +206,7 @@ def test_rehearsal_phase1_demos_only_and_drops_agent_transitions():
     core = make_core("rehearsal", demo=64, min_size=20, samples_per_insert=2.0, spi_tolerance=64)
     assert core.phase == 1 and core.demo.size == 64
     b = sample_ok(core, SampleRequest(32, 2))  # no online data, no min_size in phase 1
-    assert b.is_demo.all() and b.index.max() < 64 and b.info == {"phase": 1, "prioritized": False}
+    assert b.is_demo.all() and b.index.max() < 64 and b.info == {"phase": 1, "prioritized": False, "live": b.info["live"]}
     check_rows_traceable(core, b)
     assert core.samples == 0  # phase-1 samples do not count for the rate limiter
     assert core.insert_allowed()
@@ -232,7 +232,7 @@ def test_rehearsal_phase2_is_online_only_and_phases_never_go_back():
     assert isinstance(out, WireError) and out.reason == "rate_limited"  # online table still empty
     fill(core, 40, batch=10)
     b = sample_ok(core, SampleRequest(64, 4))
-    assert not b.is_demo.any() and b.info == {"phase": 2, "prioritized": False}
+    assert not b.is_demo.any() and b.info == {"phase": 2, "prioritized": False, "live": b.info["live"]}
     check_rows_traceable(core, b)
     # A batch made in phase 1 that arrives late is still not stored.
     assert core.ingest(tmsg("w0", 4, rows=5, start=1000, phase=1), "w0") is None
@@ -592,7 +592,8 @@ def test_stats_shape_is_json_and_complete():
     fill(core, 300)
     sample_ok(core, SampleRequest(32))
     s = core.stats()
-    assert set(s) == {"mode", "phase", "http_url", "uptime_s", "actors_total", "tables", "demo_share_buffer", "demo_share_recent_samples",
+    assert set(s) == {"mode", "phase", "http_url", "uptime_s", "actors_total", "tables", "demo_in_buffer",
+                      "demo_share_buffer", "demo_share_recent_samples",
                       "sampled_rows", "sampled_demo_rows", "requests", "rejected", "dropped", "actors", "rates",
                       "rate_limiter", "checkpoint", "sampler", "obs_shape", "obs_dtype", "n_actions"}
     assert s["tables"]["online"] == {"size": 300, "capacity": 900, "inserted": 300, "bytes": core.online.nbytes}

@@ -80,6 +80,39 @@ def test_retention_async_two_workers(tmp_path, lka_demos):
     assert list((run_dir / "tb").glob("events.out.tfevents.*"))
 
 
+def test_retention_on_two_replay_shards(tmp_path, lka_demos):
+    """replay.shards=2: two replay-server actors, each worker's transitions on its own shard, the
+    learner sampling both; the run's summary and the demo share read the two as one."""
+    run_dir = tmp_path / "run"
+    cfg = load_run_config(overrides={**FAST, "train.run_dir": str(run_dir), "replay.shards": 2,
+                                     "replay.demo_mode": "retention", "replay.demo_paths": lka_demos,
+                                     "replay.capacity": 1000, "replay.demo_ratio": 0.1, "replay.min_size": 200,
+                                     "train.env_steps": 4000})
+    out = io.StringIO()
+    assert train_local(cfg, out=out) == 0, out.getvalue()
+    summary = json.loads((run_dir / "summary.json").read_text())
+    shards = [json.loads((run_dir / f"replay_stats_shard{i}.json").read_text()) for i in range(2)]
+    assert not (run_dir / "replay_stats.json").exists()
+    # w0 -> shard 0, w1 -> shard 1 (wire.shard_of), each stored all of its worker's items.
+    workers = {w["name"]: w for w in summary["workers"]}
+    for i, replay in enumerate(shards):
+        assert set(replay["actors"]) == {f"w{i}"}
+        actor = replay["actors"][f"w{i}"]
+        assert actor["items"] == actor["stored"] == workers[f"w{i}"]["env_steps"] > 0
+        assert actor["lost_batches"] == 0 and replay["rejected"] == {}
+        assert replay["tables"]["online"]["capacity"] == 450 and replay["tables"]["demo"]["size"] == 50
+        assert replay["demo_share_buffer"] == pytest.approx(0.1)
+        assert replay["sampled_rows"] > 0  # the learner sampled both shards
+        assert (run_dir / f"replay_checkpoint_shard{i}" / "meta.json").exists()
+    assert summary["replay"]["inserted"] == 4000 and summary["replay"]["lost_batches"] == 0
+    sampled = sum(r["sampled_rows"] for r in shards)
+    demo = sum(r["sampled_demo_rows"] for r in shards)
+    assert abs(demo / sampled - 0.1) < 0.03, demo / sampled
+    assert "replay-server on" in out.getvalue() and "replay-server-1 on" in out.getvalue()
+    for w in workers.values():
+        assert w["weight_updates"] >= 2
+
+
 def test_rehearsal_phase1_stores_nothing_and_phase2_starts_from_it(tmp_path, lka_demos):
     run_dir, summary, replay = run(tmp_path, **{
         "replay.demo_mode": "rehearsal", "replay.demo_paths": lka_demos, "learner.phase1_updates": 150,

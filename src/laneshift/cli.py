@@ -255,7 +255,7 @@ def _replay_server(args: argparse.Namespace) -> int:
     cfg = _config_from(args, {"replay.http_port": args.http_port, "replay.http_host": args.http_host})
     # The one env this process builds: to learn the observation's shape and the action count.
     return _end_service_process(run_replay_server(cfg, spec_of(cfg.env), embedded_router=args.embedded_router,
-                                                  ready_file=args.ready_file))
+                                                  ready_file=args.ready_file, shard=args.shard))
 
 
 def _learner(args: argparse.Namespace) -> int:
@@ -280,6 +280,9 @@ def _add_services(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--http-port", type=non_negative_int,
                    help="serve the HTTP inspection API on this port (0 = a free one)")
     p.add_argument("--http-host", help="bind address of the HTTP API (default 127.0.0.1: loopback only)")
+    p.add_argument("--shard", type=non_negative_int, default=0,
+                   help="which shard of replay.shards this server is (default 0; a fixed HTTP port becomes "
+                        "port + shard)")
     p.set_defaults(func=_replay_server)
     p = sub.add_parser("learner", help="run the learner process")
     _add_config_args(p)
@@ -363,6 +366,9 @@ def _add_inspection(sub: argparse._SubParsersAction) -> None:
     q.add_argument("--interval", type=positive_float, default=2.0, metavar="SECONDS",
                    help="seconds between two refreshes of --watch")
     q.add_argument("--json", action="store_true", help="print the stats as JSON")
+    q.add_argument("--shards", type=positive_int, default=1,
+                   help="the run's replay.shards: with more than one, every shard's stats summed (default 1)")
+    q.add_argument("--shard", type=non_negative_int, help="only this shard's stats (with --shards)")
     q.set_defaults(func=_replay_inspect)
 
 

@@ -181,6 +181,10 @@ class ReplayConfig:
     # many frames per item of capacity. About 1 new frame an item in steady state; when the ring
     # runs out first, the oldest items go early (stats: online.frames.evicted_for_frames).
     frames_per_item: float = 2.0
+    # Replay-server shards (issue 13's scale-out): each holds capacity / shards items (and its own
+    # demo region in retention), each env worker sends to one (wire.shard_of: a stable function of
+    # its name) and the learner samples across them in proportion to their sizes (learner/shards.py).
+    shards: int = 1
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -202,6 +206,28 @@ class ReplayConfig:
         _check(self.spi_tolerance >= 0, "replay.spi_tolerance", "must be >= 0", self.spi_tolerance)
         _check(self.seed >= 0, "replay.seed", "must be >= 0", self.seed)
         _check(self.frames_per_item >= 1.0, "replay.frames_per_item", "must be >= 1", self.frames_per_item)
+        _check(1 <= self.shards <= 64, "replay.shards", "must be in [1, 64]", self.shards)
+        _check(self.capacity // self.shards >= 2 and self.min_size >= self.shards, "replay.shards",
+               f"each shard needs >= 2 items of replay.capacity ({self.capacity}) and >= 1 of replay.min_size "
+               f"({self.min_size})", self.shards)
+
+    def shard(self, index: int) -> "ReplayConfig":
+        """Shard ``index``'s own table config (itself when there is one shard): its share of ``capacity``
+        and of ``min_size`` (the first shards take the remainder), its own seed (so each shard
+        draws its own retention demo subset), and ``http_port`` + index when a port is fixed."""
+        n = self.shards
+        if n == 1:
+            return self
+        if not 0 <= index < n:
+            raise ConfigError(f"replay shard {index} of {n}")
+
+        def share(total: int) -> int:
+            return total // n + (1 if index < total % n else 0)
+
+        # ``shards=1``: the result describes one replay server's own table.
+        return dataclasses.replace(self, capacity=share(self.capacity), min_size=max(1, share(self.min_size)),
+                                   seed=self.seed + index, shards=1,
+                                   http_port=self.http_port + index if self.http_port > 0 else self.http_port)
 
     @property
     def retains_demos(self) -> bool:

@@ -41,6 +41,7 @@ import json
 import math
 import re
 import struct
+import zlib
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
@@ -81,10 +82,47 @@ class WireError(ValueError):
 # --------------------------------------------------------------------------- key expressions
 
 
+#: A replay key namespace: the run's id, or ``<run>/shard-<i>`` for one shard of a sharded replay.
+_REPLAY_NS = re.compile(r"^[A-Za-z0-9_\-]{1,64}/shard-[0-9]{1,3}$")
+
+
 def _check_name(kind: str, value: str) -> str:
+    if kind == "run" and isinstance(value, str) and _REPLAY_NS.fullmatch(value):
+        return value
     if not isinstance(value, str) or not _NAME.fullmatch(value):
         raise ValueError(f"{kind} {value!r} must match [A-Za-z0-9_-]{{1,64}}")
     return value
+
+
+#: Replay shards a run may have (``replay.shards``).
+MAX_SHARDS = 64
+
+
+def replay_namespace(run: str, shard: int, shards: int) -> str:
+    """What the replay keys of shard ``shard`` of ``shards`` are built from: the run id itself
+    when there is one shard (a single replay server's keys are what they always were), else
+    ``<run>/shard-<i>``, so ``sample_key(replay_namespace("r", 1, 2))`` is
+    ``laneshift/r/shard-1/replay/sample``. The run-wide keys (weights, episodes, control,
+    learner stats) always take the run id."""
+    _check_name("run", run)
+    if not 1 <= shards <= MAX_SHARDS or not 0 <= shard < shards:
+        raise ValueError(f"shard {shard} of {shards}: need 0 <= shard < shards <= {MAX_SHARDS}")
+    return run if shards == 1 else f"{run}/shard-{shard}"
+
+
+_TRAILING_DIGITS = re.compile(r"([0-9]+)$")
+
+
+def shard_of(actor: str, shards: int) -> int:
+    """The replay shard an actor sends to: a stable function of its name alone, so a restarted
+    actor finds its state (sequence numbers, env steps) on the same shard. A name ending in a
+    number (the builder's ``w0``, ``w1``, ...) goes to that number modulo ``shards``, which spreads
+    numbered actors evenly; any other name to its CRC-32 modulo ``shards``."""
+    _check_name("actor", actor)
+    if shards <= 1:
+        return 0
+    digits = _TRAILING_DIGITS.search(actor)
+    return (int(digits.group(1)) if digits else zlib.crc32(actor.encode())) % shards
 
 
 def transitions_key(run: str, actor: str) -> str:
