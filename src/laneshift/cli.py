@@ -421,6 +421,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     register_bench_run(bench_sub)
     register_bench_worker(bench_sub)
+    from laneshift.bench.shards import register as register_bench_shards
+
+    register_bench_shards(bench_sub)
     from laneshift.bench.suite import register as register_bench_all
 
     register_bench_all(bench_sub)
