@@ -42,6 +42,7 @@ class Placement:
     resources: dict[str, float] = field(default_factory=dict)
     max_restarts: int = 0
     max_concurrency: int = 1  # > 1: a threaded actor whose stop() runs beside its run()
+    spread: bool = False  # Ray's SPREAD strategy: over the nodes that fit it, one after another
 
     def ray_options(self) -> dict[str, Any]:
         opts: dict[str, Any] = {"name": self.name, "num_cpus": self.num_cpus, "num_gpus": self.num_gpus,
@@ -49,6 +50,8 @@ class Placement:
                                 "max_concurrency": self.max_concurrency}
         if self.resources:
             opts["resources"] = dict(self.resources)
+        if self.spread:
+            opts["scheduling_strategy"] = "SPREAD"
         return opts
 
 
@@ -145,7 +148,10 @@ class Builder:
         if component == "router":
             return Placement(f"{run}-router", d.router_cpus, 0.0, d.router_resources, d.max_restarts, 2)
         if component in self.replay_servers:
-            return Placement(f"{run}-{component}", d.replay_cpus, 0.0, d.replay_resources, d.max_restarts, 4)
+            # The shards of a sharded replay go to different nodes where they fit (each takes its
+            # share of the ingest, the memory and the network).
+            return Placement(f"{run}-{component}", d.replay_cpus, 0.0, d.replay_resources, d.max_restarts, 4,
+                             spread=len(self.replay_servers) > 1)
         if component == "learner":
             res = dict(d.learner_resources)
             gpus = float(res.pop("GPU", 0.0))  # Ray takes GPUs as num_gpus, not as a custom resource

@@ -8,6 +8,7 @@ the code under test needs."""
 
 from __future__ import annotations
 
+import dataclasses
 import errno
 import os
 import subprocess
@@ -138,6 +139,11 @@ def test_deploy_config_and_placements():
     assert learner["num_gpus"] == 1.0 and learner["resources"] == {"laneshift_learner": 1.0}
     assert learner["name"] == "r1-learner" and learner["max_restarts"] == 2 and learner["max_concurrency"] > 1
     assert b.placement("replay-server").ray_options()["resources"] == {"laneshift_replay": 1.0, "big_mem": 0.5}
+    assert "scheduling_strategy" not in b.placement("replay-server").ray_options()
+    sharded = Builder(cfg.replace(replay=dataclasses.replace(cfg.replay, shards=2, min_size=2)))
+    assert sharded.replay_servers == ["replay-server", "replay-server-1"]
+    assert [sharded.placement(n).ray_options()["scheduling_strategy"] for n in sharded.replay_servers] == ["SPREAD"] * 2
+    assert sharded.placement("replay-server-1").ray_options()["name"].endswith("-replay-server-1")
     assert b.placement("w2").ray_options()["num_cpus"] == 1.0 and "resources" not in b.placement("w2").ray_options()
     assert b.budgets == [7, 7, 6] or sum(b.budgets) == cfg.train.env_steps
     with pytest.raises(ValueError):

@@ -272,3 +272,30 @@ def test_two_host_ray_job_stop_ends_the_run_gracefully(tmp_path, netns_ok):
         assert 0 < summary["env_steps"] and summary["replay"]["inserted"] + summary["replay"]["lost_items"] == summary["env_steps"]
         print(f"ray job stop: summary ended_by {summary['ended_by']}, {summary['env_steps']} env steps, "
               f"{summary['replay']['inserted']} stored, {summary['replay']['lost_items']} lost")
+
+
+def test_two_host_sharded_replay_one_shard_per_host(tmp_path, netns_ok):
+    """``replay.shards=2`` on two hosts: the shards spread over both nodes (Ray's SPREAD), each
+    worker's transitions cross to its own shard, the learner on A samples both, nothing is lost."""
+    with twohost.two_hosts(tmp_path, worker_cpus=3) as h:
+        run_dir = tmp_path / "run"
+        argv = [str(LANESHIFT), "train", "--cluster", h.ray_address, "--workers", "2", "--scenario", "lka",
+                "--env-steps", str(ENV_STEPS), "--run-dir", str(run_dir)]
+        place = [p for p in PLACE if not p.startswith("deploy.replay_resources")]
+        for item in [*place, *FAST, "replay.shards=2"]:
+            argv += ["--set", item]
+        r = h.run_in_a(argv, timeout=300)
+        assert r.returncode == 0, _show(r, "laneshift train --cluster (2 shards)") + f"\n(logs: {h.logs})"
+        summary = json.loads((run_dir / "summary.json").read_text())
+        ip_by_id = {v: k for k, v in h.node_ids.items()}
+        where = {comp: _placement_ip(entry, ip_by_id) for comp, entry in summary["placement"].items()}
+        assert {where["replay-server"], where["replay-server-1"]} == {twohost.HOST_A, twohost.HOST_B}, where
+        workers = {w["name"]: w for w in summary["workers"]}
+        for i in range(2):
+            replay = json.loads((run_dir / f"replay_stats_shard{i}.json").read_text())
+            actor = replay["actors"][f"w{i}"]
+            assert set(replay["actors"]) == {f"w{i}"}
+            assert actor["items"] == workers[f"w{i}"]["env_steps"] > 0 and actor["lost_batches"] == 0
+            assert replay["rejected"] == {} and replay["sampled_rows"] > 0
+        assert summary["replay"]["inserted"] == ENV_STEPS and summary["replay"]["lost_items"] == 0
+        print(f"shards on {where['replay-server']} and {where['replay-server-1']}; {ENV_STEPS} transitions, 0 lost")
