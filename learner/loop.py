@@ -46,6 +46,7 @@ from laneshift.qnet import save_checkpoint, to_wire
 from .dqn import METRIC_NAMES, DoubleDQN
 from .links import LearnerLinks, ZenohLearnerLinks
 from .metrics import EvaluatePolicy, GreedyEval, MetricsLog
+from .prefetch import Prefetcher
 
 
 #: How long the end of a run waits for a running greedy evaluation (train.eval_every) before cancelling it.
@@ -86,6 +87,8 @@ class Learner:
         self.last_eval: dict | None = None
         self.last_update: Mapping[str, float] = {}  # the last update's metrics (dqn.UpdateMetrics: read lazily)
         self.replay_stats: dict = {}
+        self.prefetcher: Prefetcher | None = None  # async mode: the next sample request in flight
+        self.unused_sample_rows = 0  # rows sampled ahead that no update used (the end of a run)
         self.stop_reason: dict | None = None
         self.started = time.monotonic()
         self._updates_at_last_log, self._steps_at_last_log, self._time_at_last_log = 0, 0, time.monotonic()
@@ -202,6 +205,8 @@ class Learner:
 
     def _finish(self) -> None:
         """The end of a run: last metrics, checkpoints and state, HParams, files closed."""
+        if self.prefetcher is not None:
+            self.unused_sample_rows += self.prefetcher.close()
         self._log()  # starts the last evaluation if train.eval_every env steps passed since the previous one
         if self.evaluator is not None:  # the evaluation running now is waited for, briefly, then cancelled
             self.evaluator.close(timeout=FINAL_EVAL_WAIT_S)
@@ -290,7 +295,10 @@ class Learner:
             self.save_state()
 
     def _async_step(self) -> None:
-        batch = self._fetch(wire.SampleRequest(self.lcfg.batch_size, self.lcfg.prefetch))
+        if self.prefetcher is None:  # the next request is asked for while a batch trains (prefetch.py)
+            self.prefetcher = Prefetcher(self.links.sample,
+                                         lambda: wire.SampleRequest(self.lcfg.batch_size, self.lcfg.prefetch), self.stop)
+        batch = self.prefetcher.take(timeout=0.5)  # refusals are waited out on the prefetch thread
         if batch is None:
             return
         before = self.agent.updates
@@ -387,6 +395,8 @@ class Learner:
             "demo_share_samples": self.replay_stats.get("demo_share_recent_samples"),
             # A sharded replay: rows drawn but cut when a shard refused its part (learner/shards.py).
             "sample_rows_discarded": self.replay_stats.get("sharded_sampling", {}).get("discarded_rows", 0),
+            # Rows sampled ahead (learner/prefetch.py) that no update used: the end of the run.
+            "sample_rows_unused": self.unused_sample_rows,
             "version_lag": {a: self.version - int(s.get("last_version", 0)) for a, s in actors.items()},
             "elapsed_s": round(now - self.started, 1), "stop_reason": self.stop_reason,
         }

@@ -246,11 +246,13 @@ def test_inprocess_run_on_two_shards(tmp_path, sampler):
     assert [s["inserted"] for s in replay["shards"]] == [1000, 1000]  # w0 -> shard 0, w1 -> shard 1
     assert replay["tables"]["online"]["inserted"] == 2000 and replay["rejected"] == {}
     assert replay["actors_total"]["lost_batches"] == 0
-    # Every sampled row trained the learner (no whole batch was cut in this run) ...
-    assert result["updates"] * 32 <= replay["sampled_rows"]
+    # Every sampled row trained the learner but for the replies in flight at the end, counted ...
+    assert result["updates"] * 32 + result["learner"]["sample_rows_unused"] <= replay["sampled_rows"]
     # ... and each shard's ratio held (4 per insert after its min_size, plus its tolerance).
     for shard in replay["shards"]:
         assert shard["rate_limiter"]["samples_per_insert"] == 4.0
     assert replay["sampled_rows"] <= (2000 - 100) * 4 + 2 * 512
     if sampler == "prioritized":
-        assert replay["sampler"]["priority_updates"] == replay["requests"]["served"] > 0
+        # One priority message per shard and reply trained on (2 replies in flight at the end made none).
+        served = replay["requests"]["served"]
+        assert 0 < served - 2 * 2 <= replay["sampler"]["priority_updates"] <= served
