@@ -91,6 +91,24 @@ def _write_pid(cfg: RunConfig, component: str) -> None:
         pass
 
 
+def pin_process(learner_core: int, learner: bool) -> str | None:
+    """``deploy.learner_core``: put every thread of this process on CPU ``learner_core`` (the
+    learner) or on the node's other CPUs (any other component). Threads started later inherit it.
+    Returns what was done, for the component's log, or None when off or not possible here."""
+    if learner_core < 0 or not hasattr(os, "sched_setaffinity"):
+        return None
+    cpus = os.sched_getaffinity(0)
+    if learner_core not in cpus or len(cpus) < 2:
+        return f"deploy.learner_core {learner_core}: not pinned (this process may use CPUs {sorted(cpus)})"
+    mine = {learner_core} if learner else cpus - {learner_core}
+    for task in os.listdir("/proc/self/task"):  # sched_setaffinity(0) would set the calling thread's only
+        try:
+            os.sched_setaffinity(int(task), mine)
+        except OSError:  # a thread that ended meanwhile
+            pass
+    return f"pinned to CPUs {sorted(mine)} (deploy.learner_core {learner_core})"
+
+
 def _where() -> dict[str, Any]:
     """This actor's node: its id and the address the node registered with Ray (``ray start
     --node-ip-address``), which is what the other nodes can reach."""
@@ -113,6 +131,9 @@ class _Service:
         cfg, self.spec = _config(plain)
         _log_to_run_dir(cfg, self.component)
         _write_pid(cfg, self.component)
+        pinned = pin_process(cfg.deploy.learner_core, learner=self.component == "learner")
+        if pinned:
+            print(f"{self.component}: {pinned}", flush=True)
         self.stop_event = threading.Event()
         self.where = _where()
         if self.where["restarted"]:
@@ -227,6 +248,9 @@ class EnvWorkerActor:
         self.cfg, self.name = cfg, builder.workers[index]
         _log_to_run_dir(cfg, self.name)
         _write_pid(cfg, self.name)
+        pinned = pin_process(cfg.deploy.learner_core, learner=False)
+        if pinned:
+            print(f"{self.name}: {pinned}", flush=True)
         self.where = _where()
         self.session = transport.open_session(cfg.transport, max_message_bytes=cfg.max_message_bytes,
                                               who=self.name)

@@ -240,3 +240,28 @@ def test_zenoh_message_limit_is_sized_from_the_run():
     assert load_run_config(overrides={"transport.max_message_mb": 64}).max_message_bytes == 64 * 2**20
     with pytest.raises(ConfigError, match="transport.max_message_mb"):
         load_run_config(overrides={"env.observation": "grayscale", "transport.max_message_mb": 8})
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2, reason="needs 2 CPUs")
+def test_learner_core_pins_every_thread_of_a_component_process():
+    """``deploy.learner_core``: the learner's threads (those running already and later ones) on that
+    CPU alone, any other component's on the others; -1 leaves a process as it is. Run in child
+    processes: pinning this test's own process would pin the rest of the suite."""
+    import subprocess
+    import sys
+
+    code = ("import os, sys, threading, time\n"
+            "from laneshift.deploy.actors import pin_process\n"
+            "ev = threading.Event(); t = threading.Thread(target=ev.wait); t.start()\n"
+            "said = pin_process(int(sys.argv[1]), sys.argv[2] == 'learner')\n"
+            "late = threading.Thread(target=lambda: print(sorted(os.sched_getaffinity(0)))); late.start(); late.join()\n"
+            "print(sorted(os.sched_getaffinity(t.native_id))); print(said); ev.set()\n")
+    cpus = sorted(os.sched_getaffinity(0))
+    for who, want in (("learner", [cpus[0]]), ("w0", cpus[1:])):
+        out = subprocess.run([sys.executable, "-c", code, str(cpus[0]), who], capture_output=True, text=True,
+                             timeout=60, check=True).stdout.splitlines()
+        assert out[0] == out[1] == str(want), out
+        assert out[2].startswith(f"pinned to CPUs {want}")
+    out = subprocess.run([sys.executable, "-c", code, "-1", "learner"], capture_output=True, text=True, timeout=60,
+                         check=True).stdout.splitlines()
+    assert out[0] == str(cpus) and out[2] == "None"
