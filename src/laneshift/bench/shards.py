@@ -9,10 +9,12 @@ its shard (``wire.shard_of``), as fast as BLOCK lets it. Measured for each shard
 
 - ingest: transitions/s **stored** over a window, summed over every shard (each shard's
   ``tables.online.inserted`` against its own clock), and how evenly the shards took them;
+- CPU per process role (servers, router, publishers, this process) over the ingest window, from
+  /proc, and the servers' and router's CPU per stored transition;
 - sample latency: ``SampleRequest(256)`` through the learner's own client (one
   ``learner.links.ZenohReplayShard``, or ``learner.shards.ShardedReplay`` over one per shard:
-  requests to every shard in parallel, merge, shuffle), idle and under saturating ingest;
-- CPU per process role (servers, router, publishers, this process), from /proc.
+  requests to every shard in parallel, merge, shuffle), idle and under saturating ingest (a
+  second window).
 
     laneshift bench shards --shards 1,2,4 --json
 
@@ -245,13 +247,15 @@ class _ShardBench:
                     if time.monotonic() > fill_deadline:
                         raise BenchError(f"{run_id}: the tables did not fill in 300 s")
                     time.sleep(0.1)
+                # Window 1: ingest alone (the rate and its CPU); window 2: sample latency under it.
                 meter = _CpuMeter({"servers": [self.group.procs[n].pid for n in names],
                                    "router": [self.group.procs["router"].pid],
                                    "publishers": [p["proc"].pid for p in pubs]})
                 s0 = stats()
-                loaded = _latency(replay, a.duration)
+                time.sleep(a.duration)
                 s1 = stats()
                 cores = meter.cores()
+                loaded = _latency(replay, a.duration)
                 sent = self.stop_publishers(pubs)
                 pubs = []
                 per_shard = [(b["tables"]["online"]["inserted"] - x["tables"]["online"]["inserted"])
@@ -262,7 +266,12 @@ class _ShardBench:
                 lost = sum(int(s["actors_total"]["lost_batches"]) for s in end)
                 stored = sum(int(s["actors_total"]["items"]) for s in end)
                 rejected = sum(sum(s["rejected"].values()) for s in end)
+            server_us = cores.get("servers") and sum(per_shard) and cores["servers"] * 1e6 / sum(per_shard)
+            router_us = cores.get("router") and sum(per_shard) and cores["router"] * 1e6 / sum(per_shard)
             return {"shards": shards, "ingest_per_s": round(sum(per_shard), 1),
+                    # CPU per stored transition, which other load on the machine cannot skew.
+                    "server_cpu_us_per_transition": round(server_us, 2) if server_us else None,
+                    "router_cpu_us_per_transition": round(router_us, 2) if router_us else None,
                     "ingest_per_shard": [round(r, 1) for r in per_shard], "sample_idle": idle,
                     "sample_under_ingest": loaded, "cores_under_ingest": cores,
                     "sent": sum(sent.values()) if sent else None, "stored": stored,
@@ -324,13 +333,14 @@ def format_result(r: dict) -> str:
     lines = [f"sharded replay: {r['actors']} actors over {r['publishers']} publisher processes, {r['batch']} "
              f"transitions per message, capacity {r['capacity']:,} over all shards, {r['cpus']} CPUs",
              f"{'shards':>6} {'stored/s':>10} {'per shard':>26} {'idle p50/p99 ms':>16} {'ingest p50/p99 ms':>18}"
-             f" {'lost':>5} {'never stored':>12}   cores servers/router/publishers/other"]
+             f" {'lost':>5} {'never stored':>12} {'us/tr server':>12} {'router':>7}   cores servers/router/publishers/other"]
     for row in r["rows"]:
         c = row["cores_under_ingest"]
         lines.append(f"{row['shards']:>6} {row['ingest_per_s']:>10,.0f} {', '.join(f'{x:,.0f}' for x in row['ingest_per_shard']):>26}"
                      f" {row['sample_idle']['p50_ms']:>7.2f}/{row['sample_idle']['p99_ms']:<8.2f}"
                      f" {row['sample_under_ingest']['p50_ms']:>8.2f}/{row['sample_under_ingest']['p99_ms']:<9.2f}"
                      f" {row['lost_batches']:>5} {row['never_stored'] if row['never_stored'] is not None else '-':>12}"
+                     f" {row['server_cpu_us_per_transition'] or '-':>12} {row['router_cpu_us_per_transition'] or '-':>7}"
                      f"   {c.get('servers')}/{c.get('router')}/{c.get('publishers')}/{c.get('other')}")
     return "\n".join(lines)
 
