@@ -1,6 +1,6 @@
 """``laneshift bench all``: every benchmark, one JSON object, each peer beside ours.
 
-What it is: runs ``laneshift bench env | replay | learner | worker | run`` one after another, each
+What it is: runs ``laneshift bench env | replay | learner | worker | shards | run`` one after another, each
 as its own process with ``--json`` (so one's memory or threads cannot colour the next), and the
 RLlib peer (``benchmarks/rllib_dqn.py`` in ``.venv-rllib``, built by ``make bench-rllib``) when
 that venv exists. Then it derives issue 13's figures from them: the learner against the bare
@@ -97,6 +97,11 @@ def derive(r: dict) -> dict:
         "vs_rllib_env_steps": round(ours / theirs, 1) if ours and theirs else None,
         "vs_rllib_rss": round(run["peak_tree_rss_mb"] / peer["peak_tree_rss_mb"], 2)
         if run.get("peak_tree_rss_mb") and isinstance(peer, dict) and peer.get("peak_tree_rss_mb") else None,
+        # P7: ingest and sample latency by shard count (docs/scaling.md).
+        "p7_shards": [{k: row.get(k) for k in ("shards", "ingest_per_s", "server_cpu_us_per_transition")}
+                      | {"sample_p99_idle_ms": _get(row, "sample_idle", "p99_ms"),
+                         "sample_p99_under_ingest_ms": _get(row, "sample_under_ingest", "p99_ms")}
+                      for row in _get(r, "shards", "rows") or []],
     }
 
 
@@ -111,6 +116,8 @@ def bench_all(quick: bool) -> dict:
     result["replay"] = _bench("replay", ["--duration", seconds, "--actors", "2,8"] if quick else [], 900)
     result["learner"] = _bench("learner", ["--seconds", seconds, "--rounds", "2", "--cases", "mlp-b256,cnn-b32"], 900)
     result["worker"] = _bench("worker", ["--steps", "4000" if quick else "8000"], 600)
+    result["shards"] = _bench("shards", ["--shards", "1,2,4", "--duration", seconds,
+                                         "--capacity", "100000" if quick else "400000"], 900)
     result["run"] = _bench("run", ["--train-args", RUN_ARGS.format(steps=steps)], 900)
     result["peers"] = {"rllib": _rllib(steps // 2, 1800)}
     result["targets"] = derive(result)
