@@ -145,3 +145,49 @@ def test_a_bad_results_dir_is_one_line_and_exit_2(tmp_path, capsys, case):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("laneshift experiment replot: --results ")
     assert "Traceback" not in err
+
+
+def _more_seeds(tmp_path: Path, seed: int = 2, **change) -> Path:
+    """Another study of the same setting with one more seed of both methods (its own run dirs)."""
+    out = tmp_path / f"more-{seed}"
+    out.mkdir()
+    methods = {}
+    for method in ("none", "rehearsal"):
+        run_dir = tmp_path / f"more-runs-{seed}" / f"{method}-s{seed}"
+        _metrics(run_dir, seed)
+        methods[method] = {"runs": [{"seed": seed, "run_dir": str(run_dir), "wall_s": 1.0,
+                                     "eval": {"random": _eval(0.3, 0.3), "non-target": _eval(0.1, 0.1)}}]}
+    results = {"scenario": "straight", "env_steps": 9000, "seeds": [seed], "eval_episodes": 100,
+               "eval_max_steps": 300, "methods": methods, "baselines": {}, **change}
+    (out / "results.json").write_text(json.dumps(results))
+    return out
+
+
+def test_replot_add_merges_the_seeds_of_another_study(tmp_path, monkeypatch):
+    monkeypatch.setenv("LANESHIFT_PROGRESS", "0")
+    study, more = _study(tmp_path), _more_seeds(tmp_path)
+    out = tmp_path / "merged"
+    assert cli.main(["experiment", "replot", "--results", str(study), "--add", str(more), "--out", str(out),
+                     "--window", "10"]) == 0
+    merged = json.loads((out / "results.json").read_text())
+    assert merged["seeds"] == [0, 1, 2]
+    none = merged["methods"]["none"]
+    assert [r["seed"] for r in none["runs"]] == [0, 1, 2]
+    assert none["random"]["survival"]["per_seed"] == [0.4, 0.05, 0.3]
+    assert none["random"]["survival"]["rate"] == pytest.approx((0.4 + 0.05 + 0.3) / 3)
+    assert "keep-lane" in merged["baselines"]  # the first study's baselines stay
+    assert "| none | random | 3 |" in (out / "table.md").read_text()
+    kept = json.loads((out / EPISODES_FILE).read_text())["runs"]
+    assert set(kept) == {f"{m}-s{s}" for m in ("none", "rehearsal") for s in (0, 1, 2)}
+    assert (out / "curves_episodes.png").read_bytes()[:4] == PNG
+    assert json.loads((study / "results.json").read_text())["seeds"] == [0, 1]  # the inputs are left as they were
+
+
+@pytest.mark.parametrize("case", ["other-budget", "same-seed"])
+def test_replot_add_refuses_what_is_not_the_same_study(tmp_path, capsys, case):
+    study = _study(tmp_path)
+    more = _more_seeds(tmp_path, env_steps=5000) if case == "other-budget" else _more_seeds(tmp_path, seed=1)
+    assert cli.main(["experiment", "replot", "--results", str(study), "--add", str(more),
+                     "--out", str(tmp_path / "m")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and ("env_steps 9000 vs 5000" in err if case == "other-budget" else "seed(s) [1]" in err)

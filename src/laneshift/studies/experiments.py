@@ -531,27 +531,67 @@ def plot_eval_curves(results: dict, out_dir: Path, episodes: dict[str, dict]) ->
     return path
 
 
-def run_replot(args: argparse.Namespace) -> int:
-    """Redraw a study's table and figures from what it kept, without training."""
-    results_dir = Path(args.results)
+def _read_results(results_dir: Path, flag: str) -> dict:
+    """A compare study's results.json, or exit with one line saying what is wrong with it."""
     path = results_dir / "results.json"
     if not path.is_file():
-        raise SystemExit(f"--results {args.results}: no results.json there (name a dir written by "
+        raise SystemExit(f"{flag} {results_dir}: no results.json there (name a dir written by "
                          f"`laneshift experiment compare`)")
     try:
         results = json.loads(path.read_text())
     except (OSError, ValueError) as exc:
-        raise SystemExit(f"--results {args.results}: results.json is not readable JSON ({exc})") from None
+        raise SystemExit(f"{flag} {results_dir}: results.json is not readable JSON ({exc})") from None
     if not (isinstance(results, dict) and isinstance(results.get("methods"), dict)
             and isinstance(results.get("baselines"), dict) and "scenario" in results):
-        raise SystemExit(f"--results {args.results}: results.json is not from `laneshift experiment compare`")
+        raise SystemExit(f"{flag} {results_dir}: results.json is not from `laneshift experiment compare`")
+    return results
+
+
+#: What two studies must share for their runs to be one study's seeds.
+SAME_STUDY = ("scenario", "env_steps", "eval_episodes", "eval_max_steps")
+
+
+def merge_studies(results: dict, more: dict, where: str) -> None:
+    """Add ``more``'s runs (other seeds of the same methods, budget and evaluation) to ``results``,
+    and recompute each method's numbers over all its seeds; baselines ``results`` lacks are taken."""
+    differ = [k for k in SAME_STUDY if results.get(k) != more.get(k)]
+    if differ:
+        raise SystemExit(f"--add {where}: not the same study ({', '.join(f'{k} {results.get(k)} vs {more.get(k)}' for k in differ)})")
+    for method, body in more["methods"].items():
+        runs = results["methods"].setdefault(method, {"runs": []})["runs"]
+        seen = {r["seed"] for r in runs}
+        twice = sorted(seen & {r["seed"] for r in body["runs"]})
+        if twice:
+            raise SystemExit(f"--add {where}: {method} seed(s) {twice} are in both studies")
+        runs += body["runs"]
+        runs.sort(key=lambda r: r["seed"])
+        results["methods"][method] = {"runs": runs, **_lane_stats(runs)}
+    results["seeds"] = sorted({r["seed"] for body in results["methods"].values() for r in body["runs"]})
+    for name, body in more["baselines"].items():
+        results["baselines"].setdefault(name, body)
+
+
+def run_replot(args: argparse.Namespace) -> int:
+    """Redraw a study's table and figures from what it kept, without training (``--add``: with the
+    seeds of other studies of the same setting merged in, written as this study's results.json)."""
+    results_dir = Path(args.results)
+    results = _read_results(results_dir, "--results")
     out_dir = Path(args.out) if args.out else results_dir
     out_dir.mkdir(parents=True, exist_ok=True)
     written = []
+    episodes, from_runs = collect_episodes(results, results_dir)
+    for extra in args.add or []:
+        more = _read_results(Path(extra), "--add")
+        merge_studies(results, more, extra)
+        more_episodes, _ = collect_episodes(more, Path(extra))
+        episodes.update(more_episodes)
+        from_runs = from_runs or bool(more_episodes)
+    if args.add:
+        (out_dir / "results.json").write_text(json.dumps(results, indent=2))
+        written.append(out_dir / "results.json")
     if results["methods"]:
         (out_dir / "table.md").write_text(render_table(results))
         written += [out_dir / "table.md", plot_table2(results, out_dir)]
-    episodes, from_runs = collect_episodes(results, results_dir)
     if episodes:
         if from_runs:
             written.append(write_episodes(episodes, out_dir))
@@ -588,4 +628,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         f"curves need its {EPISODES_FILE} or the runs' metrics.jsonl")
     p.add_argument("--out", metavar="DIR", help="where table.md and the figures go (default: the --results dir)")
     p.add_argument("--window", type=positive_int, default=100, help="episodes in the curves' moving average")
+    p.add_argument("--add", action="append", metavar="DIR",
+                   help="another compare study of the same scenario, budget and evaluation whose seeds join "
+                        "this one's (repeatable); the merged results.json is written to --out")
     p.set_defaults(func=run_replot)
