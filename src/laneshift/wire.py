@@ -556,11 +556,16 @@ def _fields(buf: memoryview, end: int, layout: _Layout, copy: bool) -> np.ndarra
     return np.ndarray((), layout.dtype, buf, end)
 
 
+# The ufuncs' reduce methods, called directly: ndarray.max()/min() go through a Python wrapper first.
+_MAX, _MIN, _SUM = np.maximum.reduce, np.minimum.reduce, np.add.reduce
+
+
 def _all_finite(arr: np.ndarray) -> bool:
     # A NaN or inf anywhere makes the sum NaN or inf, so a finite sum proves every value finite in
     # one reduction without a temporary array. A non-finite sum may also be an overflow of finite
-    # values: then the exact check decides.
-    return math.isfinite(np.add.reduce(arr, axis=None)) or bool(np.isfinite(arr).all())
+    # values: then the exact check decides. (Such a sum, or +inf with -inf, makes numpy warn, once per
+    # process under Python's default filter; an np.errstate here would cost every message 2 us.)
+    return math.isfinite(_SUM(arr, axis=None)) or bool(np.isfinite(arr).all())
 
 
 def _fast_transitions(data: bytes | bytearray | memoryview, schema: TransitionSchema,
@@ -574,15 +579,17 @@ def _fast_transitions(data: bytes | bytearray | memoryview, schema: TransitionSc
     if not 1 <= layout.rows <= schema.max_rows:
         return None
     actor, extra = h.get("actor"), h.get("extra", {})
-    ints = (h.get("seq"), h.get("weights_version"), h.get("phase"), h.get("env_steps"))
+    seq, version, phase, steps = h.get("seq"), h.get("weights_version"), h.get("phase"), h.get("env_steps")
     if (type(actor) is not str or not _NAME.fullmatch(actor) or type(extra) is not dict
-            or not all(type(v) is int and 0 <= v < MAX_COUNTER for v in ints)):
+            or type(seq) is not int or type(version) is not int or type(phase) is not int or type(steps) is not int
+            or not (0 <= seq < MAX_COUNTER and 0 <= version < MAX_COUNTER and 0 <= phase < MAX_COUNTER
+                    and 0 <= steps < MAX_COUNTER)):
         return None
     a = _fields(buf, end, layout, copy)
-    if (a["action_u"].max() >= schema.n_actions or a["flags"].max() > 1 or a["steps"].min() < 1
+    if (_MAX(a["action_u"], None) >= schema.n_actions or _MAX(a["flags"], None) > 1 or _MIN(a["steps"], None) < 1
             or not all(_all_finite(a[name]) for name in layout.finite)):
         return None
-    return TransitionBatch(actor=actor, seq=ints[0], weights_version=ints[1], phase=ints[2], env_steps=ints[3],
+    return TransitionBatch(actor=actor, seq=seq, weights_version=version, phase=phase, env_steps=steps,
                            obs=a["obs"], action=a["action"], reward=a["reward"], next_obs=a["next_obs"],
                            terminated=a["terminated"], truncated=a["truncated"], steps=a["steps"], extra=extra)
 
@@ -596,7 +603,7 @@ def _fast_batch(data: bytes | bytearray | memoryview, schema: TransitionSchema) 
     if not layout.aligned or type(nb) is not int or not 1 <= nb < MAX_COUNTER or layout.rows % nb:
         return None
     a = _fields(buf, end, layout, copy=True)  # the learner keeps (and may write) the arrays
-    if a["steps"].min() < 1:
+    if _MIN(a["steps"], None) < 1:
         return None
     return SampledBatch(num_batches=nb, info=h.get("info", {}), **{k: a[k] for k in _BATCH_FIELDS})
 
