@@ -127,6 +127,7 @@ class ReplayCore:
             if cfg.sampler == "prioritized" else UniformSelector())
         self.prioritized = self.selector.prioritized
         self.priority_updates = 0
+        self._last_request: tuple[bytes, SampleRequest] | None = None  # handle_sample_query's cache
 
     # ------------------------------------------------------------------ ingest
 
@@ -137,13 +138,15 @@ class ReplayCore:
         is fully validated before anything is written, so no partial item can be stored.
         """
         try:
-            batch = decode_transitions(payload, self.schema)
+            # Views of the payload, not copies: the ring copies them below, before this returns.
+            batch = decode_transitions(payload, self.schema, copy=False)
         except WireError as exc:
             return self.reject(exc.reason)
         except Exception:  # noqa: BLE001 - a decoder bug must not take the server down
             return self.reject("decode_failed")
         if actor_key is not None and actor_key != batch.actor:
             return self.reject("actor_mismatch")
+        n, seq, env_steps = len(batch), batch.seq, batch.env_steps
         with self.lock:
             stats = self.actors.get(batch.actor)
             if stats is None:
@@ -151,29 +154,34 @@ class ReplayCore:
                 if stats is None:
                     self.rejected["too_many_actors"] += 1
                     return "too_many_actors"
-            self._last_seen[batch.actor] = time.monotonic()
-            if batch.seq > stats["last_seq"] + 1:
+            now = time.monotonic()
+            self._last_seen[batch.actor] = now
+            last_seq = stats["last_seq"]
+            if seq > last_seq + 1:
                 # A gap in seq: batches lost in transit, or stored by a server that died before its
                 # checkpoint. An actor first seen at seq k > 0 lost its first k batches here (a
                 # restarted server with no checkpoint), so last_seq starts at -1, not "unknown".
-                stats["lost_batches"] += batch.seq - stats["last_seq"] - 1
+                stats["lost_batches"] += seq - last_seq - 1
                 # Items in the gap: the actor's env steps between its last stored batch and this one.
-                stats["lost_items"] += max(0, batch.env_steps - len(batch) - stats["env_steps"])
-            stats["last_seq"] = max(stats["last_seq"], batch.seq)
+                stats["lost_items"] += max(0, env_steps - n - stats["env_steps"])
+            if seq > last_seq:
+                stats["last_seq"] = seq
             stats["batches"] += 1
-            stats["items"] += len(batch)
-            stats["last_version"] = max(stats["last_version"], batch.weights_version)
-            stats["env_steps"] = max(stats["env_steps"], batch.env_steps)
-            self.batch_history[batch.actor].append((batch.seq, batch.env_steps, len(batch)))
+            stats["items"] += n
+            if batch.weights_version > stats["last_version"]:
+                stats["last_version"] = batch.weights_version
+            if env_steps > stats["env_steps"]:
+                stats["env_steps"] = env_steps
+            self.batch_history[batch.actor].append((seq, env_steps, n))
             if self.cfg.pretrains and (self.phase == 1 or batch.phase == 1):
                 # Paper: in phase 1 the agent's own transitions are not stored.
-                self.dropped[f"{self.mode}_phase1"] += len(batch)
+                self.dropped[f"{self.mode}_phase1"] += n
                 return None
             tail = self.online.tail
             keys = self.online.insert(batch, self.actor_index[batch.actor])
             self.selector.stored(self.online, tail, keys)
-            stats["stored"] += len(batch)
-            self._rates.add("inserts", len(batch))
+            stats["stored"] += n
+            self._rates.add("inserts", n, now)
         return None
 
     def _admit(self, actor: str) -> dict[str, int] | None:
@@ -298,13 +306,18 @@ class ReplayCore:
             "action": np.empty(n, np.int64), "reward": np.empty(n, np.float32), "terminated": np.empty(n, np.uint8),
             "steps": np.empty(n, np.uint8),
         }
-        d, o = is_demo, ~is_demo
-        for name in out:
-            out[name][d] = getattr(self.demo, name)[demo_rows]
-            out[name][o] = getattr(self.online, name)[online_rows]
         index = np.empty(n, np.int64)
-        index[d] = demo_rows
-        index[o] = self.online.key[online_rows]
+        if demo_rows.shape[0] == 0:  # all rows online (no demos sampled): gather straight into the outputs
+            for name, arr in out.items():
+                _take(getattr(self.online, name), online_rows, arr)
+            _take(self.online.key, online_rows, index)
+        else:
+            d, o = is_demo, ~is_demo
+            for name in out:
+                out[name][d] = getattr(self.demo, name)[demo_rows]
+                out[name][o] = getattr(self.online, name)[online_rows]
+            index[d] = demo_rows
+            index[o] = self.online.key[online_rows]
         return SampledBatch(is_demo=is_demo.astype(np.uint8), index=index, weight=weight, num_batches=nb,
                             info={"phase": self.phase, "prioritized": self.prioritized}, **out)
 
@@ -341,11 +354,17 @@ class ReplayCore:
 
     def handle_sample_query(self, payload: bytes | bytearray | memoryview) -> bytes:
         """Bytes in, bytes out: what the zenoh queryable replies."""
-        try:
-            req = decode_sample_request(payload)
-        except WireError as exc:
-            self.reject("bad_request:" + exc.reason)
-            return encode_error("bad_request", exc.detail)
+        # A learner sends the same request bytes every time: decode them once (SampleRequest is frozen).
+        last = self._last_request
+        if last is not None and payload == last[0]:
+            req = last[1]
+        else:
+            try:
+                req = decode_sample_request(payload)
+            except WireError as exc:
+                self.reject("bad_request:" + exc.reason)
+                return encode_error("bad_request", exc.detail)
+            self._last_request = (bytes(payload), req)
         result = self.sample(req)
         if isinstance(result, WireError):
             return encode_error(result.reason, result.detail, getattr(result, "retry_after_ms", 0))
@@ -478,6 +497,16 @@ class ReplayCore:
 _SUMMED = ("batches", "items", "stored", "lost_batches", "lost_items", "env_steps")
 
 
+def _take(column: Any, rows: np.ndarray, out: np.ndarray) -> None:
+    """``out[:] = column[rows]`` without the temporary: ``np.take(out=)`` for an array column
+    (mode "clip": with the default "raise" numpy buffers ``out``; the rows come from the selector,
+    in range by construction); a frame table's stacked view gathers itself."""
+    if type(column) is np.ndarray:
+        np.take(column, rows, axis=0, out=out, mode="clip")
+    else:
+        out[...] = column[rows]
+
+
 def _retry(reason: str, detail: str, retry_ms: int) -> WireError:
     err = WireError(reason, detail)
     err.retry_after_ms = retry_ms  # type: ignore[attr-defined]
@@ -491,8 +520,8 @@ class _RateMeter:
         self.window_s = window_s
         self.events: dict[str, collections.deque] = collections.defaultdict(collections.deque)
 
-    def add(self, name: str, count: int) -> None:
-        now = time.monotonic()
+    def add(self, name: str, count: int, now: float | None = None) -> None:
+        now = time.monotonic() if now is None else now
         q = self.events[name]
         q.append((now, count))
         while q and q[0][0] < now - self.window_s:

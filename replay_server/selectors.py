@@ -55,6 +55,9 @@ class UniformSelector:
     def draw(self, rng: np.random.Generator, rows: int, n_demo: int, online_tail: int, online_size: int,
              online_capacity: int) -> Draw:
         pick = rng.integers(0, n_demo + online_size, size=rows)
+        if n_demo == 0:  # online rows only (no demos sampled): skip the masks
+            return Draw(np.zeros(rows, bool), pick[:0], (online_tail + pick) % online_capacity,
+                        np.ones(rows, np.float32))
         is_demo = pick < n_demo
         online_rows = (online_tail + pick[~is_demo] - n_demo) % online_capacity
         return Draw(is_demo, pick[is_demo], online_rows, np.ones(rows, np.float32))

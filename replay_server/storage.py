@@ -57,18 +57,25 @@ class RingTable:
         n = len(batch)
         skip = max(0, n - self.capacity)  # a batch larger than the table keeps its newest rows
         keys = np.arange(self.inserted + skip, self.inserted + n, dtype=np.int64)
-        rows = keys % self.capacity
-        self.obs[rows] = batch.obs[skip:]
-        self.next_obs[rows] = batch.next_obs[skip:]
-        self.action[rows] = batch.action[skip:]
-        self.reward[rows] = batch.reward[skip:]
-        self.terminated[rows] = batch.terminated[skip:]
-        self.truncated[rows] = batch.truncated[skip:]
-        self.steps[rows] = batch.steps[skip:]
-        self.actor[rows] = actor_index
-        self.version[rows] = batch.weights_version
-        self.key[rows] = keys
-        self.seq[rows] = batch.seq
+        # The rows are consecutive modulo the capacity: at most two slice copies per column (a
+        # fancy-index scatter per column cost 8x more per 32-row batch).
+        start = (self.inserted + skip) % self.capacity
+        first = min(n - skip, self.capacity - start)
+        for dst, src in ((slice(start, start + first), slice(skip, skip + first)),
+                         (slice(0, n - skip - first), slice(skip + first, n))):
+            if dst.stop <= dst.start:
+                continue
+            self.obs[dst] = batch.obs[src]
+            self.next_obs[dst] = batch.next_obs[src]
+            self.action[dst] = batch.action[src]
+            self.reward[dst] = batch.reward[src]
+            self.terminated[dst] = batch.terminated[src]
+            self.truncated[dst] = batch.truncated[src]
+            self.steps[dst] = batch.steps[src]
+            self.actor[dst] = actor_index
+            self.version[dst] = batch.weights_version
+            self.key[dst] = keys[src.start - skip:src.stop - skip]
+            self.seq[dst] = batch.seq
         self.inserted += n
         return keys
 

@@ -101,6 +101,8 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
                         "2 training workers produce; 0 skips it)")
     p.add_argument("--capacity-vector", type=int, default=1_000_000, help="online capacity, vector run")
     p.add_argument("--capacity-grayscale", type=int, default=20_000, help="online capacity, grayscale run")
+    p.add_argument("--no-grayscale", dest="grayscale", action="store_false",
+                   help="vector runs only (at --batch 1024 a grayscale message is 80 MB)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
 
 
@@ -597,7 +599,7 @@ def bench(args: argparse.Namespace, log: TextIO = sys.stderr) -> dict:
     scaling = [2] + [n for n in args.actors if n != 2]
     # Phases: vector fill, one window per actor count, idle sampling, sampling under saturating
     # (and paced) ingest, grayscale fill and ingest.
-    phases = 1 + len(scaling) + 2 + (args.paced_rate > 0) + 2
+    phases = 1 + len(scaling) + 2 + (args.paced_rate > 0) + 2 * getattr(args, "grayscale", True)
     b.bar = progress(total=phases, desc="bench replay", unit="phase")
     try:
         b.start_router()
@@ -648,17 +650,17 @@ def bench(args: argparse.Namespace, log: TextIO = sys.stderr) -> dict:
                                        "sampler": st.get("sampler", {}).get("kind", "uniform")}
         b.stop_server("benchvec")  # frees its memory before the grayscale table
 
-        # Grayscale observations: ingest with 2 actors.
-        gray = b.start_and_fill(result, "benchgray", "grayscale", args.capacity_grayscale, "gf")
-        b.say(f"grayscale: ingest with 2 actors for {args.duration:g} s")
-        g = b.ingest("benchgray", gray, "g2", 2)
-        b.bar.update()
-        result["ingest_grayscale_per_s"] = g["ingest_per_s"]
-        result["ingest_grayscale"] = g
-        online = b.stats("benchgray")["tables"]["online"]
-        result["bytes_per_transition_grayscale"] = online["bytes"] / online["capacity"]
-        result["grayscale_frames"] = online.get("frames")  # frames held per item (replay_server/frames.py)
-        b.stop_server("benchgray")
+        if getattr(args, "grayscale", True):  # grayscale observations: ingest with 2 actors
+            gray = b.start_and_fill(result, "benchgray", "grayscale", args.capacity_grayscale, "gf")
+            b.say(f"grayscale: ingest with 2 actors for {args.duration:g} s")
+            g = b.ingest("benchgray", gray, "g2", 2)
+            b.bar.update()
+            result["ingest_grayscale_per_s"] = g["ingest_per_s"]
+            result["ingest_grayscale"] = g
+            online = b.stats("benchgray")["tables"]["online"]
+            result["bytes_per_transition_grayscale"] = online["bytes"] / online["capacity"]
+            result["grayscale_frames"] = online.get("frames")  # frames held per item (replay_server/frames.py)
+            b.stop_server("benchgray")
 
         result["met"] = {"ingest_vector": result["ingest_vector_per_s"] >= TARGET_INGEST_VECTOR_PER_S,
                          "sample_p99": result["sample_p99_ms"] <= TARGET_SAMPLE_P99_MS}
@@ -700,6 +702,10 @@ def _loaded_lines(r: dict) -> list[str]:
 
 
 def format_result(r: dict) -> str:
+    if "ingest_grayscale" not in r:  # --no-grayscale: the same lines, grayscale figures as 0
+        zero = {"ingest_per_s": 0.0, "lost_batches": 0, "rejected": 0, "never_stored": 0, "cores": {}}
+        r = {**r, "ingest_grayscale": zero, "fill_grayscale": zero, "ingest_grayscale_per_s": 0.0,
+             "bytes_per_transition_grayscale": 0.0, "grayscale_obs": {"shape": ["-"], "dtype": "skipped"}}
     cfg, v, g = r["config"], r["ingest_vector"], r["ingest_grayscale"]
     yes = lambda ok: "met" if ok else "NOT met"  # noqa: E731
     vs, gs = "x".join(map(str, r["vector_obs"]["shape"])), "x".join(map(str, r["grayscale_obs"]["shape"]))
