@@ -457,20 +457,37 @@ class _Bench:
                          f"{self.group.log_tail(pub['name'])}")
         return sent
 
-    def settle(self, run_id: str, sent: dict[str, dict], timeout_s: float = 60.0) -> dict:
-        """Wait until the server stored everything sent (or stopped storing); returns the stats."""
+    def actors(self, run_id: str) -> dict[str, dict]:
+        """Every actor's counters, paged through ``{"cmd": "actors"}`` (a stats reply lists only
+        the first 32 by name: after the scaling rows, this window's actors are not among them)."""
+        out: dict[str, dict] = {}
+        while True:
+            data = transport.query(self.session, wire.replay_control_key(run_id),
+                                   wire.encode_json({"cmd": "actors", "offset": len(out), "limit": 256}), 10.0)
+            if data is None:
+                self.check_alive()
+                raise BenchError(f"replay server {run_id} did not answer an actors query in 10 s")
+            page = wire.decode_json(data)
+            out.update(page["actors"])
+            if not page["actors"] or len(out) >= page["total"]:
+                return out
+
+    def settle(self, run_id: str, sent: dict[str, dict], timeout_s: float = 60.0) -> tuple[dict, dict[str, dict]]:
+        """Wait until the server stored everything sent (or stopped storing); returns the stats
+        and every actor's counters."""
         deadline = time.monotonic() + timeout_s
         last, stable_since = -1, time.monotonic()
         while True:
             st = self.stats(run_id)
-            got = {a: st["actors"].get(a, {}).get("items", 0) for a in sent}
+            actors = self.actors(run_id)
+            got = {a: actors.get(a, {}).get("items", 0) for a in sent}
             if all(got[a] >= sent[a]["items"] for a in sent):
-                return st
+                return st, actors
             now = time.monotonic()
             if st["tables"]["online"]["inserted"] != last:
                 last, stable_since = st["tables"]["online"]["inserted"], now
             elif now - stable_since > 3.0 or now > deadline:
-                return st
+                return st, actors
             time.sleep(0.1)
 
     # --- measurements
@@ -520,11 +537,10 @@ class _Bench:
             self.check_alive()
         finally:
             sent = self.stop_publishers(pubs)
-        after = self.settle(run_id, sent)
+        after, actors_after = self.settle(run_id, sent)
         window = s1["uptime_s"] - s0["uptime_s"]
         stored = s1["tables"]["online"]["inserted"] - s0["tables"]["online"]["inserted"]
         rate = stored / window if window > 0 else 0.0
-        actors_after = after["actors"]
         lost = sum(actors_after.get(n, {}).get("lost_batches", 0) for n in names)
         received = sum(actors_after.get(n, {}).get("items", 0) for n in names)
         total_sent = sum(s["items"] for s in sent.values()) if len(sent) == len(names) else None
@@ -646,7 +662,7 @@ def bench(args: argparse.Namespace, log: TextIO = sys.stderr) -> dict:
         online = st["tables"]["online"]
         result["bytes_per_transition_vector"] = online["bytes"] / online["capacity"]
         result["server_vector_end"] = {"inserted": online["inserted"], "rejected": st["rejected"],
-                                       "lost_batches": sum(v["lost_batches"] for v in st["actors"].values()),
+                                       "lost_batches": st["actors_total"]["lost_batches"],
                                        "sampler": st.get("sampler", {}).get("kind", "uniform")}
         b.stop_server("benchvec")  # frees its memory before the grayscale table
 

@@ -55,7 +55,7 @@ def _bench(name: str, args: list[str], timeout_s: float) -> dict:
 
 
 def _rllib(steps: int, timeout_s: float) -> dict:
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[3]  # the repo: src/laneshift/bench/suite.py
     python, script = root / ".venv-rllib" / "bin" / "python", root / "benchmarks" / "rllib_dqn.py"
     if not python.exists() or not script.exists():
         return {"skipped": "no .venv-rllib here: `make bench-rllib` builds it (RLlib pins gymnasium 1.2.2)"}
