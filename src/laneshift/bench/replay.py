@@ -41,7 +41,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any, Callable, TextIO
 
 import numpy as np
 
@@ -309,6 +309,22 @@ class _CpuMeter:
 # ----------------------------------------------------------------------------- the benchmark
 
 
+def wait_for_router(endpoint: str, check_alive: Callable[[], None], timeout_s: float = 60.0) -> None:
+    """A zenoh client retries forever: make sure the router listens before opening a session."""
+    host, port = endpoint.split("/", 1)[1].rsplit(":", 1)
+    deadline = time.monotonic() + timeout_s
+    while True:
+        check_alive()
+        try:
+            socket.create_connection((host, int(port)), timeout=1).close()
+            return
+        except OSError:
+            if time.monotonic() > deadline:
+                raise BenchError(f"the router did not listen on {endpoint} within {timeout_s:g} s") from None
+            time.sleep(0.05)
+
+
+
 class _Bench:
     def __init__(self, args: argparse.Namespace, work: Path, log: TextIO):
         from laneshift.deploy.processes import ProcessGroup
@@ -333,18 +349,7 @@ class _Bench:
     def start_router(self) -> None:
         self.group.start("router", [*self.py, "router", "--listen", self.endpoint])
         self.live.add("router")
-        # A zenoh client retries forever: make sure the router listens before opening a session.
-        host, port = self.endpoint.split("/", 1)[1].rsplit(":", 1)
-        deadline = time.monotonic() + 60
-        while True:
-            self.check_alive()
-            try:
-                socket.create_connection((host, int(port)), timeout=1).close()
-                return
-            except OSError:
-                if time.monotonic() > deadline:
-                    raise BenchError(f"the router did not listen on {self.endpoint} within 60 s") from None
-                time.sleep(0.05)
+        wait_for_router(self.endpoint, self.check_alive)
 
     def start_server(self, name: str, observation: str, capacity: int) -> wire.TransitionSchema:
         from laneshift.config import load_run_config, save_run_config
@@ -578,17 +583,24 @@ class _Bench:
                 raise BenchError(f"sample returned {batch.action.shape[0]} rows, asked {SAMPLE_BATCH}")
             return dt
 
-        for _ in range(warmup_n):
-            once()
-        times: list[float] = []
-        end = time.perf_counter() + duration
-        while time.perf_counter() < end or len(times) < min_n:
-            times.append(once())
-        ms = np.array(times) * 1e3
+        timed = time_calls(once, duration, warmup_n, min_n)
         reply = transport.query(self.session, key, req, 10.0) or b""
-        return {"n": len(times), "p50_ms": round(float(np.percentile(ms, 50)), 3),
-                "p99_ms": round(float(np.percentile(ms, 99)), 3), "mean_ms": round(float(ms.mean()), 3),
-                "max_ms": round(float(ms.max()), 3), "reply_bytes": len(reply)}
+        return {**timed, "reply_bytes": len(reply)}
+
+
+def time_calls(once: Callable[[], float], duration: float, warmup_n: int, min_n: int) -> dict:
+    """``once()`` (which returns its own seconds) ``warmup_n`` times untimed, then for ``duration``
+    seconds and at least ``min_n`` times: count, p50, p99, mean and max in ms."""
+    for _ in range(warmup_n):
+        once()
+    times: list[float] = []
+    end = time.perf_counter() + duration
+    while time.perf_counter() < end or len(times) < min_n:
+        times.append(once())
+    ms = np.array(times) * 1e3
+    return {"n": len(times), "p50_ms": round(float(np.percentile(ms, 50)), 3),
+            "p99_ms": round(float(np.percentile(ms, 99)), 3), "mean_ms": round(float(ms.mean()), 3),
+            "max_ms": round(float(ms.max()), 3)}
 
 
 def _zenoh_version() -> str:

@@ -28,7 +28,6 @@ import json
 import os
 import shutil
 import signal
-import socket
 import sys
 import tempfile
 import threading
@@ -42,7 +41,7 @@ from laneshift import transport, wire
 from laneshift.config import TransportConfig
 from laneshift.progress import write as progress_write
 
-from .replay import MESSAGES_PER_ACTOR, SAMPLE_BATCH, BenchError, _CpuMeter, synthetic_message
+from .replay import MESSAGES_PER_ACTOR, SAMPLE_BATCH, BenchError, _CpuMeter, synthetic_message, time_calls, wait_for_router
 
 
 def register(subparsers: Any) -> None:
@@ -144,16 +143,15 @@ class _ShardBench:
 
     def start_router(self) -> None:
         self.group.start("router", [*self.py, "router", "--listen", self.endpoint])
-        host, port = self.endpoint.split("/", 1)[1].rsplit(":", 1)
-        deadline = time.monotonic() + 60
-        while True:
-            try:
-                socket.create_connection((host, int(port)), timeout=1).close()
-                return
-            except OSError:
-                if time.monotonic() > deadline:
-                    raise BenchError(f"the router did not listen on {self.endpoint} within 60 s") from None
-                time.sleep(0.05)
+        wait_for_router(self.endpoint, self.check_router)
+
+    def check_router(self) -> None:
+        from laneshift.deploy.processes import ChildFailed
+
+        try:
+            self.group.check_alive(["router"])
+        except ChildFailed as exc:
+            raise BenchError(str(exc)) from None
 
     def start_servers(self, run_id: str, shards: int) -> list[str]:
         from laneshift.config import load_run_config, save_run_config
@@ -295,15 +293,7 @@ def _latency(replay: Any, duration: float, warmup: int = 10, min_n: int = 20) ->
             raise BenchError(f"sample refused or short: {batch!r:.200}")
         return dt
 
-    for _ in range(warmup):
-        once()
-    times: list[float] = []
-    end = time.perf_counter() + duration
-    while time.perf_counter() < end or len(times) < min_n:
-        times.append(once())
-    ms = np.array(times) * 1e3
-    return {"n": len(times), "p50_ms": round(float(np.percentile(ms, 50)), 3),
-            "p99_ms": round(float(np.percentile(ms, 99)), 3), "mean_ms": round(float(ms.mean()), 3)}
+    return time_calls(once, duration, warmup, min_n)
 
 
 def bench(args: argparse.Namespace, log: TextIO = sys.stderr) -> dict:
