@@ -201,7 +201,7 @@ class Run:
                 which = f"shard {shard}/{len(replay_servers)} " if len(replay_servers) > 1 else ""
                 self._say(f"train: replay {which}inspection API {http}/stats on node {self.where[name]['node_ip']} "
                           f"(or: laneshift replay inspect --router {endpoint} --run-id {cfg.transport.run_id}"
-                          + (f" --shard {shard})" if len(replay_servers) > 1 else ")"))
+                          + (f" --shards {len(replay_servers)} --shard {shard})" if len(replay_servers) > 1 else ")"))
         learner = self.where["learner"]
         if learner.get("metrics_url"):
             self._say(f"train: learner metrics (Prometheus) {learner['metrics_url']}")
