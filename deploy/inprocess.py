@@ -6,7 +6,7 @@ talking through in-memory links to a ReplayCore (one per shard with ``replay.sha
 worker sending to its shard and the learner sampling all through ``learner.shards.ShardedReplay``,
 as over zenoh). Every message still goes through the wire encoder and decoder, so the contract is
 exercised as in a real run.
-May import: the contract and ``deploy.builder``.
+May import: the contract, ``deploy.builder`` and the learner's replay seams (``learner.links``, ``learner.shards``).
 
     >>> from laneshift.config import load_run_config
     >>> cfg = load_run_config(overrides={"env.scenario": "lka", "train.env_steps": 2000})  # doctest: +SKIP
@@ -23,6 +23,9 @@ from typing import Any
 
 from laneshift import wire
 from laneshift.config import RunConfig
+
+from laneshift.learner.links import ReplayThrough
+from laneshift.learner.shards import ShardedReplay
 
 from .builder import Builder
 
@@ -94,30 +97,16 @@ class InProcessReplay:
         return self.core.handle_control(body)
 
 
-class InProcessLearnerLinks:
+class InProcessLearnerLinks(ReplayThrough):
     def __init__(self, board: Board, schema: wire.TransitionSchema, beta: float = 0.4, seed: int = 0):
-        from laneshift.learner.shards import ShardedReplay
-
         self.board, self.schema = board, schema
         shards = [InProcessReplay(core, schema) for core in board.cores]
         self.replay = shards[0] if len(shards) == 1 else ShardedReplay(shards, beta=beta, seed=seed)
-
-    def sample(self, req: wire.SampleRequest) -> wire.SampledBatch | wire.WireError | None:
-        return self.replay.sample(req)
-
-    def replay_stats(self) -> dict | None:
-        return self.replay.replay_stats()
-
-    def replay_control(self, body: dict) -> dict | None:
-        return self.replay.replay_control(body)
 
     def publish_weights(self, payload: bytes) -> None:
         with self.board.cond:
             self.board.weights = payload
             self.board.cond.notify_all()
-
-    def send_priorities(self, payload: bytes) -> None:
-        self.replay.send_priorities(payload)
 
     def publish_stats(self, payload: bytes) -> None:
         self.board.learner_stats = wire.decode_json(payload)

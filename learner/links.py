@@ -97,7 +97,26 @@ class ZenohReplayShard:
         self._priorities.put(payload)
 
 
-class ZenohLearnerLinks:
+class ReplayThrough:
+    """The ``ReplayClient`` half of a LearnerLinks, handed on to ``self.replay``: one replay
+    server's client, or ``ShardedReplay`` over one per shard (zenoh and in-process links alike)."""
+
+    replay: ReplayClient
+
+    def sample(self, req: wire.SampleRequest) -> wire.SampledBatch | wire.WireError | None:
+        return self.replay.sample(req)
+
+    def replay_stats(self) -> dict | None:
+        return self.replay.replay_stats()
+
+    def replay_control(self, body: dict) -> dict | None:
+        return self.replay.replay_control(body)
+
+    def send_priorities(self, payload: bytes) -> None:
+        self.replay.send_priorities(payload)
+
+
+class ZenohLearnerLinks(ReplayThrough):
     """LearnerLinks over zenoh: queries to the replay server (or, with ``replay.shards`` > 1, to
     every shard through ``ShardedReplay``), weights published with BLOCK."""
 
@@ -120,18 +139,6 @@ class ZenohLearnerLinks:
                                    cfg.transport.router) for i in range(n)]
         self.replay: ReplayClient = shards[0] if n == 1 else ShardedReplay(
             shards, beta=cfg.replay.priority_beta, seed=cfg.learner.seed)
-
-    def sample(self, req: wire.SampleRequest) -> wire.SampledBatch | wire.WireError | None:
-        return self.replay.sample(req)
-
-    def replay_stats(self) -> dict | None:
-        return self.replay.replay_stats()
-
-    def replay_control(self, body: dict) -> dict | None:
-        return self.replay.replay_control(body)
-
-    def send_priorities(self, payload: bytes) -> None:
-        self.replay.send_priorities(payload)
 
     def publish_weights(self, payload: bytes) -> None:
         self._latest = payload
