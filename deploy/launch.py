@@ -35,7 +35,7 @@ from typing import Any, TextIO
 
 from laneshift.config import RunConfig, save_run_config
 
-from .builder import Builder
+from .builder import Builder, resolve_learner_core
 
 from .errors import LaunchError
 from .ray_connection import RayConnection
@@ -444,6 +444,8 @@ def train(cfg: RunConfig, *, address: str | None = None, out: TextIO = sys.stdou
         cfg = ensure_demo_shard(cfg, out)
         if signals.received:
             raise KeyboardInterrupt
+        cfg = cfg.replace(deploy=dataclasses.replace(  # auto -> a CPU in local mode, off on a cluster
+            cfg.deploy, learner_core=resolve_learner_core(cfg.deploy.learner_core, local=address is None)))
         run = Run(cfg, local=address is None, out=out, signals=signals)
         run.env_spec = spec_thread.result()
         run.start()

@@ -265,3 +265,21 @@ def test_learner_core_pins_every_thread_of_a_component_process():
     out = subprocess.run([sys.executable, "-c", code, "-1", "learner"], capture_output=True, text=True, timeout=60,
                          check=True).stdout.splitlines()
     assert out[0] == str(cpus) and out[2] == "None"
+
+
+def test_learner_core_auto_is_the_last_cpu_in_local_mode_and_off_on_a_cluster(monkeypatch):
+    """``deploy.learner_core`` -2 (the default): the launcher pins the learner to its machine's last
+    CPU in local mode when it may use two or more, and to nothing on a cluster or on one CPU;
+    -1 and an explicit CPU pass through."""
+    from laneshift.config import load_run_config
+    from laneshift.deploy.builder import resolve_learner_core
+
+    assert load_run_config().deploy.learner_core == -2
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1, 2, 5}, raising=False)
+    assert resolve_learner_core(-2, local=True) == 5
+    assert resolve_learner_core(-2, local=False) == -1
+    assert resolve_learner_core(-1, local=True) == -1 and resolve_learner_core(3, local=False) == 3
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0}, raising=False)
+    assert resolve_learner_core(-2, local=True) == -1
+    with pytest.raises(ConfigError, match="deploy.learner_core"):
+        load_run_config(overrides={"deploy.learner_core": -3})

@@ -262,15 +262,7 @@ def two_hosts(tmp_path: Path, dashboard: bool = False, up_timeout: float = 150.0
     started = time.monotonic()
     body_failed = True
     try:
-        # ---- network: two namespaces, one veth pair, both ends inside them
-        for ns in (ns_a, ns_b):
-            _ip("netns", "add", ns)
-            made_ns.append(ns)
-        _ip("link", "add", veth_a, "netns", ns_a, "type", "veth", "peer", "name", veth_b, "netns", ns_b)
-        for ns, dev, addr in ((ns_a, veth_a, HOST_A), (ns_b, veth_b, HOST_B)):
-            _ip("-n", ns, "addr", "add", f"{addr}/{PREFIX}", "dev", dev)
-            _ip("-n", ns, "link", "set", dev, "up")
-            _ip("-n", ns, "link", "set", "lo", "up")
+        _link_namespaces(ns_a, ns_b, veth_a, veth_b, made_ns)
 
         # ---- the shared secret: a fresh token in a file of our own (never ~/.ray)
         secret_dir = tempfile.mkdtemp(prefix="lstok")
@@ -420,6 +412,37 @@ def _teardown(procs: list[subprocess.Popen], children: list[subprocess.Popen], n
         if _ns_exists(ns):
             survivors.append(f"network namespace {ns}")
     return survivors
+
+
+def _link_namespaces(ns_a: str, ns_b: str, veth_a: str, veth_b: str, made: list[str]) -> None:
+    """Two namespaces (appended to ``made`` as each exists, for the teardown), one veth pair with
+    both ends inside them: HOST_A in ``ns_a``, HOST_B in ``ns_b``."""
+    for ns in (ns_a, ns_b):
+        _ip("netns", "add", ns)
+        made.append(ns)
+    _ip("link", "add", veth_a, "netns", ns_a, "type", "veth", "peer", "name", veth_b, "netns", ns_b)
+    for ns, dev, addr in ((ns_a, veth_a, HOST_A), (ns_b, veth_b, HOST_B)):
+        _ip("-n", ns, "addr", "add", f"{addr}/{PREFIX}", "dev", dev)
+        _ip("-n", ns, "link", "set", dev, "up")
+        _ip("-n", ns, "link", "set", "lo", "up")
+
+
+@contextlib.contextmanager
+def linked_namespaces(tmp_path: Path) -> Iterator[tuple[str, str]]:
+    """Two namespaces and their veth link, no Ray (for benchmarks that start their own processes
+    with ``ip netns exec``); every process left inside them is killed and both are removed after."""
+    reason = netns_unavailable_reason()
+    if reason:
+        raise RuntimeError(f"linked_namespaces: {reason}")
+    n, pid = next(_counter), os.getpid()
+    made: list[str] = []
+    try:
+        _link_namespaces(f"lsA-{pid}-{n}", f"lsB-{pid}-{n}", f"lsa{pid}x{n}", f"lsb{pid}x{n}", made)
+        yield made[0], made[1]
+    finally:
+        survivors = _teardown([], [], made, [], Path(tmp_path))
+        if survivors:
+            print(f"linked_namespaces: left behind: {survivors}", flush=True)
 
 
 def _is_alive(pid: int) -> bool:

@@ -405,10 +405,12 @@ class DeployConfig:
     start_timeout_s: float = 180.0  # a component that is not serving by then fails the run, named
     # No transition stored for this long while workers run: fail with a message instead of waiting forever.
     stall_timeout_s: float = 300.0
-    # -1: no pinning. k >= 0: the learner's process runs on CPU k alone and every other component
-    # process of the run on the node's other CPUs (os.sched_setaffinity), so the learner's update
-    # never waits for a core the env workers hold (issue 13, P1). For one machine or the learner's node.
-    learner_core: int = -1
+    # k >= 0: the learner's process runs on CPU k alone and every other component process of the
+    # run on the node's other CPUs (os.sched_setaffinity), so the learner's update never waits for
+    # a core the env workers hold (issue 13, P1: +25 % env steps/s on 2 cores, docs/performance.md).
+    # -1: no pinning. -2 (auto, the default): local mode pins the learner to the machine's last CPU
+    # when the launcher may use two or more; a cluster run pins nothing (``resolve_learner_core``).
+    learner_core: int = -2
 
     def __post_init__(self) -> None:
         _check(0 <= self.router_port <= 65535, "deploy.router_port", "must be 0 (default) or a port",
@@ -425,7 +427,8 @@ class DeployConfig:
         _check(self.max_restarts >= 0, "deploy.max_restarts", "must be >= 0", self.max_restarts)
         _check(self.start_timeout_s > 0, "deploy.start_timeout_s", "must be > 0", self.start_timeout_s)
         _check(self.stall_timeout_s > 0, "deploy.stall_timeout_s", "must be > 0", self.stall_timeout_s)
-        _check(self.learner_core >= -1, "deploy.learner_core", "must be -1 (off) or a CPU number", self.learner_core)
+        _check(self.learner_core >= -2, "deploy.learner_core", "must be -2 (auto), -1 (off) or a CPU number",
+               self.learner_core)
 
 
 @dataclass(frozen=True)

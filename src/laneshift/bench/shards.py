@@ -57,6 +57,12 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--batch", type=int, default=32, help="transitions per message (default 32)")
     p.add_argument("--capacity", type=int, default=400_000, help="replay.capacity over all shards")
     p.add_argument("--duration", type=float, default=3.0, help="seconds per measurement window")
+    p.add_argument("--netns", default="",
+                   help="network namespaces NS1,NS2,...: the router in NS1, shard i and publisher j in the "
+                        "namespace i (j) mod their count, as on that many hosts (root; run this command in NS1; "
+                        "tests/twohost_shards_bench.py makes two and runs it)")
+    p.add_argument("--router-ip", default="127.0.0.1",
+                   help="the address the router listens on and every process connects to (with --netns: NS1's)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
 
 
@@ -132,17 +138,23 @@ class _ShardBench:
         from laneshift.deploy.processes import ProcessGroup
 
         self.args, self.work, self.log = args, work, log
-        self.endpoint = f"tcp/127.0.0.1:{transport.free_tcp_port()}"
+        self.endpoint = f"tcp/{args.router_ip}:{transport.free_tcp_port()}"
         self.group = ProcessGroup(work / "logs")
         self.py = [sys.executable, "-m", "laneshift"]
+        self.namespaces = [ns for ns in str(args.netns).split(",") if ns.strip()]
         self.t0 = time.monotonic()
         self.schema = _vector_schema()
+
+    def host(self, i: int) -> list[str]:
+        """The argv prefix that starts process ``i`` of a kind on "host" i mod the namespaces' count
+        (``ip netns exec`` execs the command: its pid is the process's own)."""
+        return ["ip", "netns", "exec", self.namespaces[i % len(self.namespaces)]] if self.namespaces else []
 
     def say(self, msg: str) -> None:
         progress_write(f"[bench shards {time.monotonic() - self.t0:5.1f}s] {msg}", file=self.log)
 
     def start_router(self) -> None:
-        self.group.start("router", [*self.py, "router", "--listen", self.endpoint])
+        self.group.start("router", [*self.host(0), *self.py, "router", "--listen", self.endpoint])
         wait_for_router(self.endpoint, self.check_router)
 
     def check_router(self) -> None:
@@ -166,7 +178,7 @@ class _ShardBench:
         names = []
         for i in range(shards):
             name, ready = f"{run_id}-s{i}", self.work / f"{run_id}-s{i}.ready"
-            self.group.start(name, [*self.py, "replay-server", "--config", str(path), "--shard", str(i),
+            self.group.start(name, [*self.host(i), *self.py, "replay-server", "--config", str(path), "--shard", str(i),
                                     "--ready-file", str(ready)])
             names.append(name)
         try:
@@ -192,7 +204,7 @@ class _ShardBench:
         for j in range(min(a.publishers, len(actors))):
             tag = f"{run_id}-pub{j}"
             files = {k: self.work / f"{tag}.{k}" for k in ("ready", "go", "report")}
-            argv = [sys.executable, "-m", "laneshift.bench.shards", "_publish", "--router", self.endpoint,
+            argv = [*self.host(j), sys.executable, "-m", "laneshift.bench.shards", "_publish", "--router", self.endpoint,
                     "--run-id", run_id, "--shards", str(shards), "--actors", ",".join(actors[j::a.publishers]),
                     "--batch", str(a.batch), "--seed", str(j), *(x for k, f in files.items() for x in (f"--{k}", str(f)))]
             pubs.append({"name": tag, "proc": self.group.start(tag, argv), **files})
@@ -312,7 +324,8 @@ def bench(args: argparse.Namespace, log: TextIO = sys.stderr) -> dict:
             b.say(f"{n} shard(s): {rows[-1]['ingest_per_s']:,.0f} transitions/s stored; sample p99 "
                   f"{rows[-1]['sample_idle']['p99_ms']} ms idle, {rows[-1]['sample_under_ingest']['p99_ms']} ms under ingest")
         return {"bench": "shards", "batch": args.batch, "actors": args.actors, "publishers": args.publishers,
-                "capacity": args.capacity, "cpus": os.cpu_count(), "rows": rows}
+                "capacity": args.capacity, "cpus": os.cpu_count(), "netns": b.namespaces, "router": b.endpoint,
+                "rows": rows}
     finally:
         b.group.stop_all()
         signal.signal(signal.SIGTERM, old_term)
@@ -321,7 +334,8 @@ def bench(args: argparse.Namespace, log: TextIO = sys.stderr) -> dict:
 
 def format_result(r: dict) -> str:
     lines = [f"sharded replay: {r['actors']} actors over {r['publishers']} publisher processes, {r['batch']} "
-             f"transitions per message, capacity {r['capacity']:,} over all shards, {r['cpus']} CPUs",
+             f"transitions per message, capacity {r['capacity']:,} over all shards, {r['cpus']} CPUs"
+             + (f"; namespaces {', '.join(r['netns'])} (router {r['router']})" if r.get("netns") else ""),
              f"{'shards':>6} {'stored/s':>10} {'per shard':>26} {'idle p50/p99 ms':>16} {'ingest p50/p99 ms':>18}"
              f" {'lost':>5} {'never stored':>12} {'us/tr server':>12} {'router':>7}   cores servers/router/publishers/other"]
     for row in r["rows"]:
