@@ -57,3 +57,23 @@ $(RLLIB_STAMP): pyproject.toml
 
 bench-rllib: $(RLLIB_STAMP)
 	@$(RLLIB_PY) benchmarks/rllib_dqn.py $(RLLIB_ARGS)
+
+# The replay peer (docs/replay-bench.md): DeepMind Reverb 0.14, the replay service Acme uses, under
+# laneshift's replay benchmark's load. Its own venv: Reverb links TensorFlow 2.15, which needs numpy<2.
+# tensorflow-cpu, so no CUDA packages. make bench-reverb REVERB_ARGS="--batch 256"
+REVERB_VENV ?= .venv-reverb
+REVERB_PY := $(REVERB_VENV)/bin/python
+REVERB_STAMP := $(REVERB_VENV)/.installed-stamp
+REVERB_ARGS ?=
+
+.PHONY: bench-reverb
+
+$(REVERB_STAMP):
+	$(PYTHON) -m venv $(REVERB_VENV)
+	$(REVERB_PY) -m pip install --disable-pip-version-check -q --no-deps dm-reverb==0.14.0
+	$(REVERB_PY) -m pip install --disable-pip-version-check -q tensorflow-cpu==2.15.1 dm-tree portpicker "numpy<2"
+	@if $(REVERB_PY) -m pip list 2>/dev/null | grep -i nvidia; then echo "error: CUDA packages were installed"; exit 1; fi
+	@touch $(REVERB_STAMP)
+
+bench-reverb: $(REVERB_STAMP)
+	@TF_CPP_MIN_LOG_LEVEL=2 $(REVERB_PY) benchmarks/reverb_replay.py $(REVERB_ARGS)

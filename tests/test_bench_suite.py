@@ -19,7 +19,8 @@ def test_derive_computes_each_target_from_the_benchmarks():
                                 "learner_over_bare_cpu": 0.97}]},
          "run": {"training_env_steps_per_s": 960.0, "peak_tree_rss_mb": 1800, "peak_tree_pss_mb": 1300,
                  "first_stored_s": 14.0},
-         "peers": {"rllib": {"env_steps_per_s": 80.0, "peak_tree_rss_mb": 2000}},
+         "peers": {"rllib": {"env_steps_per_s": 80.0, "peak_tree_rss_mb": 2000},
+                   "reverb": {"ingest_per_s": 1e4, "sample_idle": {"p99_ms": 30.0}}},
          "shards": {"rows": [_shard_row(1, 2e5), _shard_row(2, 3e5)]},
          "ingest_1024": {"rows": [_shard_row(1, 1.05e6)]}}
     t = derive(r)
@@ -27,13 +28,16 @@ def test_derive_computes_each_target_from_the_benchmarks():
     assert t["p1_fraction_of_bound"] == 0.8
     assert t["vs_rllib_env_steps"] == 12.0 and t["vs_rllib_rss"] == 0.9
     assert t["p2_ingest_per_s_1024_per_message"] == 1.05e6
+    assert t["vs_reverb_ingest"] == 20.0 and t["reverb_sample_p99_idle_ms"] == 30.0
     assert [row["shards"] for row in t["p7_shards"]] == [1, 2]
     assert t["p7_shards"][0]["sample_p99_idle_ms"] == 4.0
 
 
 def test_derive_leaves_null_what_did_not_run():
-    r = {"learner": {"error": "x"}, "run": {"error": "x"}, "peers": {"rllib": {"skipped": "no venv"}},
+    r = {"learner": {"error": "x"}, "run": {"error": "x"},
+         "peers": {"rllib": {"skipped": "no venv"}, "reverb": {"skipped": "no venv"}},
          "shards": {"error": "x"}, "ingest_1024": {"error": "x"}}
     t = derive(r)
     assert t["p1_fraction_of_bound"] is None and t["vs_rllib_env_steps"] is None
     assert t["p2_ingest_per_s_1024_per_message"] is None and t["p7_shards"] == []
+    assert t["vs_reverb_ingest"] is None and t["reverb_ingest_per_s"] is None

@@ -2,10 +2,11 @@
 
 What it is: runs ``laneshift bench env | replay | learner | worker | shards | run`` one after another, each
 as its own process with ``--json`` (so one's memory or threads cannot colour the next), and the
-RLlib peer (``benchmarks/rllib_dqn.py`` in ``.venv-rllib``, built by ``make bench-rllib``) when
-that venv exists. Then it derives issue 13's figures from them: the learner against the bare
+RLlib peer (``benchmarks/rllib_dqn.py`` in ``.venv-rllib``, built by ``make bench-rllib``) and the
+Reverb peer (``benchmarks/reverb_replay.py`` in ``.venv-reverb``, ``make bench-reverb``) when their
+venvs exist. Then it derives issue 13's figures from them: the learner against the bare
 loop (P5), env steps/s against the learner-bound (P1), peak memory (P8), start-up, and laneshift
-against RLlib. Nothing is measured twice and nothing is estimated: a figure whose benchmark did
+against RLlib and Reverb. Nothing is measured twice and nothing is estimated: a figure whose benchmark did
 not run is ``null`` with the reason.
 May import: the contract and ``deploy``.
 
@@ -69,12 +70,35 @@ def _rllib(steps: int, timeout_s: float) -> dict:
         return {"error": f"{type(exc).__name__}: {exc}"}
 
 
+def _reverb(duration: str, capacity: str, timeout_s: float) -> dict:
+    """The replay peer: Reverb under the load of ``bench shards --shards 1`` (benchmarks/reverb_replay.py)."""
+    root = Path(__file__).resolve().parents[3]
+    python, script = root / ".venv-reverb" / "bin" / "python", root / "benchmarks" / "reverb_replay.py"
+    if not python.exists() or not script.exists():
+        return {"skipped": "no .venv-reverb here: `make bench-reverb` builds it (Reverb needs TensorFlow 2.15, numpy<2)"}
+    print("bench all: reverb ...", file=sys.stderr, flush=True)
+    args = ["--duration", duration, "--capacity", capacity]
+    try:
+        done = subprocess.run([str(python), str(script), *args], capture_output=True, text=True, timeout=timeout_s,
+                              cwd=root, env={**os.environ, "TF_CPP_MIN_LOG_LEVEL": "2"})
+        return {"command": f".venv-reverb/bin/python benchmarks/reverb_replay.py {' '.join(args)}",
+                **_last_json(done.stdout)}
+    except (subprocess.TimeoutExpired, ValueError) as exc:
+        return {"error": f"{type(exc).__name__}: {exc}"}
+
+
 def _get(d: dict, *path: str):
     for key in path:
         if not isinstance(d, dict) or key not in d:
             return None
         d = d[key]
     return d
+
+
+def _ratio(shard_rows: list | None, theirs: float | None) -> float | None:
+    """Our one-shard ingest over the peer's (the p7 row whose load the peer ran)."""
+    ours = next((row.get("ingest_per_s") for row in shard_rows or [] if row.get("shards") == 1), None)
+    return round(ours / theirs, 1) if ours and theirs else None
 
 
 def derive(r: dict) -> dict:
@@ -98,6 +122,10 @@ def derive(r: dict) -> dict:
         "vs_rllib_rss": round(run["peak_tree_rss_mb"] / peer["peak_tree_rss_mb"], 2)
         if run.get("peak_tree_rss_mb") and isinstance(peer, dict) and peer.get("peak_tree_rss_mb") else None,
         "p2_ingest_per_s_1024_per_message": (_get(r, "ingest_1024", "rows") or [{}])[0].get("ingest_per_s"),
+        # The replay peer, under the load of the p7 row with one shard.
+        "vs_reverb_ingest": _ratio(_get(r, "shards", "rows"), _get(r, "peers", "reverb", "ingest_per_s")),
+        "reverb_ingest_per_s": _get(r, "peers", "reverb", "ingest_per_s"),
+        "reverb_sample_p99_idle_ms": _get(r, "peers", "reverb", "sample_idle", "p99_ms"),
         # P7: ingest and sample latency by shard count (docs/scaling.md).
         "p7_shards": [{k: row.get(k) for k in ("shards", "ingest_per_s", "server_cpu_us_per_transition")}
                       | {"sample_p99_idle_ms": _get(row, "sample_idle", "p99_ms"),
@@ -124,7 +152,8 @@ def bench_all(quick: bool) -> dict:
     result["ingest_1024"] = _bench("shards", ["--shards", "1", "--batch", "1024", "--duration", seconds,
                                               "--capacity", "500000" if quick else "2000000"], 900)
     result["run"] = _bench("run", ["--train-args", RUN_ARGS.format(steps=steps)], 900)
-    result["peers"] = {"rllib": _rllib(steps // 2, 1800)}
+    result["peers"] = {"rllib": _rllib(steps // 2, 1800),
+                       "reverb": _reverb(seconds, "100000" if quick else "400000", 900)}
     result["targets"] = derive(result)
     return result
 
