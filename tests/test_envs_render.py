@@ -70,3 +70,14 @@ def test_frames_are_real_with_sdl_dummy_driver() -> None:
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120, check=True)
     n_values, centre = map(int, out.stdout.split()[-2:])
     assert n_values >= 4 and centre == GRAY_PALETTE["ego"]
+
+
+def test_the_renderer_loads_pygames_lazy_surfarray_at_import():
+    """pygame-ce's surfarray is a LazyLoader module, not thread-safe before Python 3.12: two
+    in-process workers drawing their first frame at once saw it half-loaded and one died
+    ("no attribute 'pixels_red'", 5 of 13 runs of tests/test_inprocess.py). Importing the renderer
+    must leave it fully loaded, before any thread draws. A fresh interpreter: nothing else loads it."""
+    code = ("import types, pygame, laneshift.actors.envs.rendering\n"
+            "print(type(pygame.surfarray) is types.ModuleType, hasattr(pygame.surfarray, 'pixels_red'))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True)
+    assert out.stdout.split() == ["True", "True"], out.stdout + out.stderr

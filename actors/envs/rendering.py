@@ -31,6 +31,12 @@ import pygame  # noqa: E402
 
 from .scenarios import Layout  # noqa: E402
 
+# pygame-ce loads pygame.surfarray lazily (importlib.util.LazyLoader), which is not thread-safe
+# before Python 3.12: two env threads drawing their first frame at once (in-process mode's
+# workers) could see the module half-loaded ("no attribute 'pixels_red'"), and that worker died.
+# Reading the functions here loads it once, under this module's import lock.
+_pixels_red, _array3d = pygame.surfarray.pixels_red, pygame.surfarray.array3d
+
 #: Grey level of each element in the grayscale observation.
 GRAY_PALETTE: dict[str, int] = {
     "offroad": 0,
@@ -138,8 +144,8 @@ class TopDownRenderer:
                 py = Y[j] + corners[:, 0] * s + corners[:, 1] * c
                 pygame.draw.polygon(surf, color, self._pix(px, py, ox, oy))
         if self.grayscale:
-            return np.array(pygame.surfarray.pixels_red(surf)).T.copy()
-        return np.transpose(pygame.surfarray.array3d(surf), (1, 0, 2)).copy()
+            return np.array(_pixels_red(surf)).T.copy()
+        return np.transpose(_array3d(surf), (1, 0, 2)).copy()
 
     def _pix(self, x: np.ndarray, y: np.ndarray, ox: float, oy: float) -> list[tuple[float, float]]:
         k = self.scaling
