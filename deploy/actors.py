@@ -211,9 +211,11 @@ class LearnerActor(_Service):
         import torch
 
         from laneshift import transport
+        from laneshift.learner.loop import set_learner_switch_interval
 
         cfg = self._begin(plain)
         torch.set_num_threads(cfg.learner.torch_threads)
+        set_learner_switch_interval()
         builder = Builder(cfg, self.spec)
         self.session = transport.open_session(cfg.transport, max_message_bytes=cfg.max_message_bytes, who="learner")
         self.learner = builder.learner(builder.learner_links(self.session, self.stop_event), self.stop_event)
