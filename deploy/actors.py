@@ -30,6 +30,7 @@ from laneshift.config import RunConfig, load_run_config
 from laneshift.envspec import EnvSpec, spec_from_dict
 
 from .builder import Builder
+from .pinning import pin_process
 
 
 def _config(plain: dict) -> tuple[RunConfig, EnvSpec | None]:
@@ -89,24 +90,6 @@ def _write_pid(cfg: RunConfig, component: str) -> None:
         (Path(cfg.train.run_dir) / "logs" / f"{component}.pid").write_text(str(os.getpid()))
     except OSError:
         pass
-
-
-def pin_process(learner_core: int, learner: bool) -> str | None:
-    """``deploy.learner_core``: put every thread of this process on CPU ``learner_core`` (the
-    learner) or on the node's other CPUs (any other component). Threads started later inherit it.
-    Returns what was done, for the component's log, or None when off or not possible here."""
-    if learner_core < 0 or not hasattr(os, "sched_setaffinity"):
-        return None
-    cpus = os.sched_getaffinity(0)
-    if learner_core not in cpus or len(cpus) < 2:
-        return f"deploy.learner_core {learner_core}: not pinned (this process may use CPUs {sorted(cpus)})"
-    mine = {learner_core} if learner else cpus - {learner_core}
-    for task in os.listdir("/proc/self/task"):  # sched_setaffinity(0) would set the calling thread's only
-        try:
-            os.sched_setaffinity(int(task), mine)
-        except OSError:  # a thread that ended meanwhile
-            pass
-    return f"pinned to CPUs {sorted(mine)} (deploy.learner_core {learner_core})"
 
 
 def _where() -> dict[str, Any]:

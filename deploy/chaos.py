@@ -175,7 +175,11 @@ def _ray_processes(run_dir: Path) -> list[int]:
 
 FAULTS: dict[str, dict] = {
     "worker": {"component": "w1"},
-    "learner": {"component": "learner", "needs": "learner_state"},
+    # The kill waits for a learner state saved after training began; on a fast machine the whole
+    # budget could be spent before one was (the learner alone on its core makes ~340 updates/s
+    # here), so states come 4x as often and the replay ratio holds the workers to the learner.
+    "learner": {"component": "learner", "needs": "learner_state",
+                "overrides": {"learner.checkpoint_every_s": 0.25, "replay.samples_per_insert": 32}},
     "router": {"component": "router"},
     "replay": {"component": "replay-server", "overrides": {"replay.checkpoint_every_s": 0}},
     "replay-after-checkpoint": {"component": "replay-server", "needs": "replay_checkpoint",

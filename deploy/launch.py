@@ -38,6 +38,7 @@ from laneshift.config import RunConfig, save_run_config
 from .builder import Builder, resolve_learner_core
 
 from .errors import LaunchError
+from .pinning import pin_process_tree
 from .ray_connection import RayConnection
 from .run_dir import RunDirLock, default_demo_dir, ensure_demo_shard, prepare_run_dir  # noqa: F401 - re-exported
 from .summary import summarise
@@ -188,6 +189,13 @@ class Run:
             self._create(name, EnvWorkerActor, worker_plain, i)
         self._await_started(["router", *replay_servers, "learner", *self.builder.workers])
         self.timeline["rest"] = time.monotonic() - began - self.timeline["router"]
+        if self.local and cfg.deploy.learner_core >= 0:
+            # After the start (which uses every CPU for the components' imports): Ray's own
+            # processes and this launcher off the learner's CPU; workers Ray starts later inherit it.
+            moved = pin_process_tree(cfg.deploy.learner_core, skip={self.where["learner"]["pid"]})
+            if moved:
+                self._say(f"train: CPU {cfg.deploy.learner_core} is the learner's alone (deploy.learner_core; "
+                          f"this launcher and {moved - 1} other processes of Ray's moved off it; -1 turns it off)")
         for name in ("router", *replay_servers, "learner"):
             self.refs[name] = self.handles[name].run.remote()
         for name, share in zip(self.builder.workers, self.builder.budgets):

@@ -251,7 +251,7 @@ def test_learner_core_pins_every_thread_of_a_component_process():
     import sys
 
     code = ("import os, sys, threading, time\n"
-            "from laneshift.deploy.actors import pin_process\n"
+            "from laneshift.deploy.pinning import pin_process\n"
             "ev = threading.Event(); t = threading.Thread(target=ev.wait); t.start()\n"
             "said = pin_process(int(sys.argv[1]), sys.argv[2] == 'learner')\n"
             "late = threading.Thread(target=lambda: print(sorted(os.sched_getaffinity(0)))); late.start(); late.join()\n"
@@ -283,3 +283,37 @@ def test_learner_core_auto_is_the_last_cpu_in_local_mode_and_off_on_a_cluster(mo
     assert resolve_learner_core(-2, local=True) == -1
     with pytest.raises(ConfigError, match="deploy.learner_core"):
         load_run_config(overrides={"deploy.learner_core": -3})
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2, reason="needs 2 CPUs")
+def test_local_mode_moves_the_launcher_and_its_processes_off_the_learners_cpu():
+    """``pin_process_tree``: the launcher and every process below it (Ray's own, in local mode) but
+    the skipped one (the learner's) go off the learner's CPU, threads included; a process started
+    later by one of them inherits that, and a restarted learner's ``pin_process`` gets its CPU back. In a child process, so this
+    test's own process keeps its CPUs."""
+    import subprocess
+    import sys
+
+    code = ("import os, subprocess, sys, threading, time\n"
+            "from laneshift.deploy.pinning import pin_process, pin_process_tree\n"
+            "core = int(sys.argv[1])\n"
+            "child = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(30)'])\n"
+            "learner_pid = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(30)'])\n"
+            "ev = threading.Event(); t = threading.Thread(target=ev.wait); t.start()\n"
+            "moved = pin_process_tree(core, skip={learner_pid.pid})\n"
+            "late = subprocess.run([sys.executable, '-c', 'import os; print(sorted(os.sched_getaffinity(0)))'],\n"
+            "                      capture_output=True, text=True).stdout.strip()\n"
+            "learner = subprocess.run([sys.executable, '-c', 'from laneshift.deploy.pinning import pin_process; '\n"
+            "                          'import os; pin_process(%d, True); print(sorted(os.sched_getaffinity(0)))' % core],\n"
+            "                         capture_output=True, text=True).stdout.strip()\n"
+            "print(moved); print(sorted(os.sched_getaffinity(child.pid))); print(sorted(os.sched_getaffinity(t.native_id)))\n"
+            "print(late); print(learner); print(sorted(os.sched_getaffinity(learner_pid.pid)))\n"
+            "ev.set(); child.kill(); learner_pid.kill()\n")
+    cpus = sorted(os.sched_getaffinity(0))
+    out = subprocess.run([sys.executable, "-c", code, str(cpus[-1])], capture_output=True, text=True, timeout=120,
+                         check=True).stdout.splitlines()
+    others = str(cpus[:-1])
+    assert int(out[0]) >= 2, out  # itself and its child
+    assert out[1] == out[2] == out[3] == others, out
+    assert out[4] == str([cpus[-1]]), out
+    assert out[5] == str(cpus), out  # the skipped process (the learner's) keeps its CPUs

@@ -23,7 +23,7 @@ from pathlib import Path
 import pytest
 
 from laneshift.config import load_run_config
-from laneshift.deploy.chaos import FAST, FaultInjector
+from laneshift.deploy.chaos import FAST, FAULTS, FaultInjector
 from laneshift.deploy.chaos import alive as _alive
 from laneshift.deploy.chaos import descendants as _descendants
 from laneshift.deploy.local import train_local
@@ -67,7 +67,10 @@ def test_learner_killed_comes_back_from_its_state_with_a_higher_version(tmp_path
         since.append(since[0] if since else time.time())
         return state.exists() and state.stat().st_mtime > since[0]
 
-    run_dir, summary, replay, _ = run_with_fault(tmp_path, "learner", at_steps=1500, extra=saved_after_training_began)
+    # The chaos suite's learner fault settings (deploy.chaos.FAULTS): states often, workers held to
+    # the learner, so a state with updates in it is written long before the budget is spent.
+    run_dir, summary, replay, _ = run_with_fault(tmp_path, "learner", at_steps=1500, extra=saved_after_training_began,
+                                                 **FAULTS["learner"]["overrides"])
     log = (run_dir / "logs" / "learner.log").read_text()
     assert "restored" in log and "restarted by Ray" in log
     # Versions never went backwards: every worker's versions, in the order it used them, only grow.

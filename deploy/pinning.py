@@ -1,0 +1,80 @@
+"""``deploy.learner_core``: the learner on a CPU of its own, everything else of the run off it.
+
+Two halves. Each component process pins itself when it starts (``pin_process``: the learner to
+its CPU, any other component to the node's other CPUs). In local mode the launcher also moves
+itself and every Ray process it started off the learner's CPU once the components run
+(``pin_process_tree``): the GCS, the raylet, the dashboard and its agents, the monitors. Ray
+workers started later (a restarted component) are the raylet's children and inherit its mask, so
+the learner's CPU runs the learner alone; a restarted learner pins itself back onto it.
+
+Room: deploy, the wiring. May import: the standard library only.
+"""
+
+from __future__ import annotations
+
+import os
+
+
+def _set_all_threads(pid: int, cpus: set[int]) -> bool:
+    """Every thread of ``pid`` on ``cpus`` (``sched_setaffinity(pid)`` sets one thread's only).
+    False if the process is gone or refuses; a thread that ended meanwhile is skipped."""
+    try:
+        tasks = os.listdir(f"/proc/{pid}/task")
+    except OSError:
+        return False
+    done = False
+    for task in tasks:
+        try:
+            os.sched_setaffinity(int(task), cpus)
+            done = True
+        except OSError:
+            pass
+    return done
+
+
+def pin_process(learner_core: int, learner: bool) -> str | None:
+    """This process's threads on CPU ``learner_core`` (the learner) or on the node's other CPUs
+    (any other component). Threads started later inherit it. Returns what was done, for the
+    component's log, or None when off or not possible here."""
+    if learner_core < 0 or not hasattr(os, "sched_setaffinity"):
+        return None
+    # In local mode this process may have inherited a mask without the learner's CPU already
+    # (pin_process_tree on the raylet): the node's CPUs are that mask and the learner's.
+    cpus = os.sched_getaffinity(0) | {learner_core}
+    mine = {learner_core} if learner else cpus - {learner_core}
+    if len(cpus) < 2 or not _set_all_threads(os.getpid(), mine) or os.sched_getaffinity(0) != mine:
+        return f"deploy.learner_core {learner_core}: not pinned (this process may use CPUs {sorted(os.sched_getaffinity(0))})"
+    return f"pinned to CPUs {sorted(mine)} (deploy.learner_core {learner_core})"
+
+
+def _children(pid: int) -> list[int]:
+    kids = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat") as f:
+                    if int(f.read().rsplit(")", 1)[1].split()[1]) == pid:
+                        kids.append(int(entry))
+            except (OSError, ValueError, IndexError):
+                pass
+    return kids
+
+
+def pin_process_tree(learner_core: int, skip: frozenset[int] | set[int] = frozenset()) -> int:
+    """Local mode, once the components run: this launcher and all its descendants (Ray's own
+    processes, the components' worker processes) but ``skip`` (the learner's) off CPU
+    ``learner_core``. Returns how many processes were moved."""
+    if learner_core < 0 or not hasattr(os, "sched_setaffinity"):
+        return 0
+    others = os.sched_getaffinity(0) - {learner_core}
+    if not others:
+        return 0
+    moved, todo, seen = 0, [os.getpid()], set()
+    while todo:
+        pid = todo.pop()
+        if pid in seen or pid in skip:
+            continue
+        seen.add(pid)
+        moved += _set_all_threads(pid, others)
+        todo += _children(pid)
+    return moved
