@@ -15,7 +15,6 @@ and the commands that start one component (``laneshift.cli``).
 
 from __future__ import annotations
 
-import os
 import threading
 from dataclasses import dataclass, field
 from typing import Any
@@ -169,13 +168,3 @@ class Builder:
 
             return free_tcp_port()
         return CLUSTER_ROUTER_PORT
-
-
-def resolve_learner_core(learner_core: int, local: bool) -> int:
-    """``deploy.learner_core`` -2 (auto) made concrete by the launcher: in local mode the last CPU
-    the launcher may use, when it may use two or more (one CPU: nothing to set apart); a cluster
-    run's nodes are not the launcher's machine, so auto pins nothing there. -1 and k stay."""
-    if learner_core != -2:
-        return learner_core
-    cpus = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
-    return cpus[-1] if local and len(cpus) >= 2 else -1

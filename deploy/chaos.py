@@ -34,6 +34,8 @@ from typing import Callable
 
 from laneshift.config import load_run_config
 
+from .processes import descendants  # noqa: F401 - re-exported (bench.run, the fault tests)
+
 #: A small, fast run with every mechanism on (LKA plant: seconds per thousand steps).
 FAST = {"env.scenario": "lka", "actor.workers": 2, "actor.send_every": 50, "actor.epsilon_decay_steps": 1000,
         "learner.hidden": "64,64", "learner.batch_size": 64, "learner.publish_every": 10,
@@ -128,25 +130,6 @@ def _digest(paths: list[str]) -> str:
             if p.is_file():
                 h.update(p.read_bytes())
     return h.hexdigest()
-
-
-def descendants(pid: int) -> set[int]:
-    """Every process below ``pid`` now (children, their children, ...), read from /proc."""
-    children: dict[int, list[int]] = {}
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
-            except (OSError, IndexError, ValueError):
-                continue
-            children.setdefault(ppid, []).append(int(entry.name))
-    found, todo = set(), [pid]
-    while todo:
-        for child in children.get(todo.pop(), []):
-            if child not in found:
-                found.add(child)
-                todo.append(child)
-    return found
 
 
 def alive(pid: int) -> bool:

@@ -35,10 +35,10 @@ from typing import Any, TextIO
 
 from laneshift.config import RunConfig, save_run_config
 
-from .builder import Builder, resolve_learner_core
+from .builder import Builder
 
 from .errors import LaunchError
-from .pinning import pin_process_tree
+from .pinning import own_cpus, pin_process_tree, resolve_learner_core, restore_own_cpus
 from .ray_connection import RayConnection
 from .run_dir import RunDirLock, default_demo_dir, ensure_demo_shard, prepare_run_dir  # noqa: F401 - re-exported
 from .summary import summarise
@@ -436,6 +436,7 @@ def train(cfg: RunConfig, *, address: str | None = None, out: TextIO = sys.stdou
                       else dataclasses.replace(cfg.learner, metrics_port=0))
     lock = RunDirLock(run_dir)
     ray_conn = RayConnection(address)
+    launcher_cpus = own_cpus()  # Run.start may move this process off the learner's CPU
     run: Run | None = None
     rc = 1
     try:
@@ -487,4 +488,5 @@ def train(cfg: RunConfig, *, address: str | None = None, out: TextIO = sys.stdou
         ray_conn.close()
         lock.release()
         signals.restore()
+        restore_own_cpus(launcher_cpus)
     return rc

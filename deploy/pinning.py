@@ -1,18 +1,31 @@
 """``deploy.learner_core``: the learner on a CPU of its own, everything else of the run off it.
 
-Two halves. Each component process pins itself when it starts (``pin_process``: the learner to
-its CPU, any other component to the node's other CPUs). In local mode the launcher also moves
+The launcher makes the default (-2, auto) concrete (``resolve_learner_core``). Then two halves.
+Each component process pins itself when it starts (``pin_process``: the learner to its CPU, any
+other component to the node's other CPUs). In local mode the launcher also moves
 itself and every Ray process it started off the learner's CPU once the components run
 (``pin_process_tree``): the GCS, the raylet, the dashboard and its agents, the monitors. Ray
 workers started later (a restarted component) are the raylet's children and inherit its mask, so
 the learner's CPU runs the learner alone; a restarted learner pins itself back onto it.
 
-Room: deploy, the wiring. May import: the standard library only.
+Room: deploy, the wiring. May import: the standard library and ``deploy.processes``.
 """
 
 from __future__ import annotations
 
 import os
+
+from .processes import descendants
+
+
+def resolve_learner_core(learner_core: int, local: bool) -> int:
+    """``deploy.learner_core`` -2 (auto) made concrete by the launcher: in local mode the last CPU
+    the launcher may use, when it may use two or more (one CPU: nothing to set apart); a cluster
+    run's nodes are not the launcher's machine, so auto pins nothing there. -1 and k stay."""
+    if learner_core != -2:
+        return learner_core
+    cpus = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
+    return cpus[-1] if local and len(cpus) >= 2 else -1
 
 
 def _set_all_threads(pid: int, cpus: set[int]) -> bool:
@@ -47,17 +60,17 @@ def pin_process(learner_core: int, learner: bool) -> str | None:
     return f"pinned to CPUs {sorted(mine)} (deploy.learner_core {learner_core})"
 
 
-def _children(pid: int) -> list[int]:
-    kids = []
-    for entry in os.listdir("/proc"):
-        if entry.isdigit():
-            try:
-                with open(f"/proc/{entry}/stat") as f:
-                    if int(f.read().rsplit(")", 1)[1].split()[1]) == pid:
-                        kids.append(int(entry))
-            except (OSError, ValueError, IndexError):
-                pass
-    return kids
+def own_cpus() -> set[int] | None:
+    """The CPUs this process may use now (None where affinity is not supported), for
+    ``restore_own_cpus`` after ``pin_process_tree`` moved it."""
+    return os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity") else None
+
+
+def restore_own_cpus(cpus: set[int] | None) -> None:
+    """Every thread of this process back on ``cpus``: a launcher called as a library (the tests, a
+    notebook) must not stay off the learner's CPU after its run."""
+    if cpus:
+        _set_all_threads(os.getpid(), cpus)
 
 
 def pin_process_tree(learner_core: int, skip: frozenset[int] | set[int] = frozenset()) -> int:
@@ -69,12 +82,5 @@ def pin_process_tree(learner_core: int, skip: frozenset[int] | set[int] = frozen
     others = os.sched_getaffinity(0) - {learner_core}
     if not others:
         return 0
-    moved, todo, seen = 0, [os.getpid()], set()
-    while todo:
-        pid = todo.pop()
-        if pid in seen or pid in skip:
-            continue
-        seen.add(pid)
-        moved += _set_all_threads(pid, others)
-        todo += _children(pid)
-    return moved
+    root = os.getpid()
+    return sum(_set_all_threads(pid, others) for pid in ({root} | descendants(root)) - set(skip))

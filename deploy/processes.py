@@ -100,3 +100,22 @@ def wait_for_file(path: Path, timeout_s: float, group: ProcessGroup, name: str) 
         group.check_alive([name])
         time.sleep(0.05)
     raise ChildFailed(f"{name} did not become ready in {timeout_s:.0f} s; end of its log:\n{group.log_tail(name)}")
+
+
+def descendants(pid: int) -> set[int]:
+    """Every process below ``pid`` now (children, their children, ...), read from /proc."""
+    children: dict[int, list[int]] = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):
+                continue
+            children.setdefault(ppid, []).append(int(entry.name))
+    found, todo = set(), [pid]
+    while todo:
+        for child in children.get(todo.pop(), []):
+            if child not in found:
+                found.add(child)
+                todo.append(child)
+    return found

@@ -10,24 +10,12 @@ from __future__ import annotations
 import argparse
 import json
 import os
-from pathlib import Path
 
 import numpy as np
 
 from laneshift import wire
 from laneshift.bench import replay as bench_replay
-
-
-def _children(pid: int) -> set[int]:
-    out = set()
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                if int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1]) == pid:
-                    out.add(int(entry.name))
-            except (OSError, IndexError, ValueError):
-                pass
-    return out
+from laneshift.deploy.processes import descendants
 
 
 def test_bench_replay_json_end_to_end(capsys) -> None:
@@ -36,7 +24,7 @@ def test_bench_replay_json_end_to_end(capsys) -> None:
     args = parser.parse_args(["replay", "--duration", "1.0", "--warmup", "0.2", "--actors", "2",
                               "--capacity-vector", "2000", "--capacity-grayscale", "300", "--paced-rate", "2000",
                               "--json"])
-    before = _children(os.getpid())
+    before = descendants(os.getpid())
     assert args.func(args) == 0
     captured = capsys.readouterr()
     out = json.loads(captured.out.strip().splitlines()[-1])
@@ -67,7 +55,7 @@ def test_bench_replay_json_end_to_end(capsys) -> None:
     assert set(out["met"]) == {"ingest_vector", "sample_p99"}
     text = bench_replay.format_result(out)  # the text form renders from the same dict
     assert "actor scaling" in text and "sample latency" in text
-    assert _children(os.getpid()) <= before  # every router, server and publisher was stopped
+    assert descendants(os.getpid()) <= before  # every router, server and publisher was stopped
 
 
 def test_patched_messages_decode_with_their_counters() -> None:

@@ -10,21 +10,9 @@ from __future__ import annotations
 import argparse
 import json
 import os
-from pathlib import Path
 
 from laneshift.bench import shards as bench_shards
-
-
-def _children(pid: int) -> set[int]:
-    """PIDs whose parent is ``pid`` (field 4 of /proc/<pid>/stat, after the command's parenthesis)."""
-    kids = set()
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            if int(stat.read_text().rsplit(")", 1)[1].split()[1]) == pid:
-                kids.add(int(stat.parent.name))
-        except (OSError, IndexError, ValueError):
-            pass
-    return kids
+from laneshift.deploy.processes import descendants
 
 
 def test_bench_shards_json_end_to_end(capsys) -> None:
@@ -32,7 +20,7 @@ def test_bench_shards_json_end_to_end(capsys) -> None:
     bench_shards.register(parser.add_subparsers())
     args = parser.parse_args(["shards", "--shards", "1,2", "--actors", "4", "--capacity", "4000",
                               "--duration", "0.5", "--json"])
-    before = _children(os.getpid())
+    before = descendants(os.getpid())
     assert args.func(args) == 0
     result = json.loads(capsys.readouterr().out)
     assert [row["shards"] for row in result["rows"]] == [1, 2]
@@ -41,4 +29,4 @@ def test_bench_shards_json_end_to_end(capsys) -> None:
         assert all(rate > 0 for rate in row["ingest_per_shard"])  # a0..a3 reach every shard
         assert row["lost_batches"] == 0 and row["rejected"] == 0 and row["never_stored"] == 0
         assert row["sample_idle"]["n"] >= 20 and row["sample_idle"]["p99_ms"] >= row["sample_idle"]["p50_ms"] > 0
-    assert _children(os.getpid()) == before  # every child process is gone
+    assert descendants(os.getpid()) == before  # every child process is gone

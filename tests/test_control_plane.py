@@ -272,7 +272,7 @@ def test_learner_core_auto_is_the_last_cpu_in_local_mode_and_off_on_a_cluster(mo
     CPU in local mode when it may use two or more, and to nothing on a cluster or on one CPU;
     -1 and an explicit CPU pass through."""
     from laneshift.config import load_run_config
-    from laneshift.deploy.builder import resolve_learner_core
+    from laneshift.deploy.pinning import resolve_learner_core
 
     assert load_run_config().deploy.learner_core == -2
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1, 2, 5}, raising=False)
@@ -295,8 +295,8 @@ def test_local_mode_moves_the_launcher_and_its_processes_off_the_learners_cpu():
     import sys
 
     code = ("import os, subprocess, sys, threading, time\n"
-            "from laneshift.deploy.pinning import pin_process, pin_process_tree\n"
-            "core = int(sys.argv[1])\n"
+            "from laneshift.deploy.pinning import own_cpus, pin_process, pin_process_tree, restore_own_cpus\n"
+            "core = int(sys.argv[1]); before = own_cpus()\n"
             "child = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(30)'])\n"
             "learner_pid = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(30)'])\n"
             "ev = threading.Event(); t = threading.Thread(target=ev.wait); t.start()\n"
@@ -308,6 +308,7 @@ def test_local_mode_moves_the_launcher_and_its_processes_off_the_learners_cpu():
             "                         capture_output=True, text=True).stdout.strip()\n"
             "print(moved); print(sorted(os.sched_getaffinity(child.pid))); print(sorted(os.sched_getaffinity(t.native_id)))\n"
             "print(late); print(learner); print(sorted(os.sched_getaffinity(learner_pid.pid)))\n"
+            "restore_own_cpus(before); print(sorted(os.sched_getaffinity(t.native_id)))\n"
             "ev.set(); child.kill(); learner_pid.kill()\n")
     cpus = sorted(os.sched_getaffinity(0))
     out = subprocess.run([sys.executable, "-c", code, str(cpus[-1])], capture_output=True, text=True, timeout=120,
@@ -317,3 +318,4 @@ def test_local_mode_moves_the_launcher_and_its_processes_off_the_learners_cpu():
     assert out[1] == out[2] == out[3] == others, out
     assert out[4] == str([cpus[-1]]), out
     assert out[5] == str(cpus), out  # the skipped process (the learner's) keeps its CPUs
+    assert out[6] == str(cpus), out  # and the launcher gets its CPUs back after the run, every thread

@@ -324,7 +324,6 @@ def wait_for_router(endpoint: str, check_alive: Callable[[], None], timeout_s: f
             time.sleep(0.05)
 
 
-
 class _Bench:
     def __init__(self, args: argparse.Namespace, work: Path, log: TextIO):
         from laneshift.deploy.processes import ProcessGroup

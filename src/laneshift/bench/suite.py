@@ -55,36 +55,31 @@ def _bench(name: str, args: list[str], timeout_s: float) -> dict:
     return {"command": "laneshift " + " ".join(cmd[3:]), **result}
 
 
-def _rllib(steps: int, timeout_s: float) -> dict:
+def _peer(name: str, venv: str, script: str, args: list[str], why_venv: str, timeout_s: float,
+          env: dict[str, str] | None = None) -> dict:
+    """A peer benchmark in its own venv (``make bench-<name>`` builds it): its JSON, or why none."""
     root = Path(__file__).resolve().parents[3]  # the repo: src/laneshift/bench/suite.py
-    python, script = root / ".venv-rllib" / "bin" / "python", root / "benchmarks" / "rllib_dqn.py"
-    if not python.exists() or not script.exists():
-        return {"skipped": "no .venv-rllib here: `make bench-rllib` builds it (RLlib pins gymnasium 1.2.2)"}
-    print("bench all: rllib ...", file=sys.stderr, flush=True)
+    python, path = root / venv / "bin" / "python", root / "benchmarks" / script
+    if not python.exists() or not path.exists():
+        return {"skipped": f"no {venv} here: `make bench-{name}` builds it ({why_venv})"}
+    print(f"bench all: {name} ...", file=sys.stderr, flush=True)
     try:
-        done = subprocess.run([str(python), str(script), "--env-steps", str(steps)], capture_output=True, text=True,
-                              timeout=timeout_s, cwd=root)
-        return {"command": f".venv-rllib/bin/python benchmarks/rllib_dqn.py --env-steps {steps}",
-                **_last_json(done.stdout)}
+        done = subprocess.run([str(python), str(path), *args], capture_output=True, text=True, timeout=timeout_s,
+                              cwd=root, env={**os.environ, **(env or {})})
+        return {"command": f"{venv}/bin/python benchmarks/{script} {' '.join(args)}", **_last_json(done.stdout)}
     except (subprocess.TimeoutExpired, ValueError) as exc:
         return {"error": f"{type(exc).__name__}: {exc}"}
+
+
+def _rllib(steps: int, timeout_s: float) -> dict:
+    return _peer("rllib", ".venv-rllib", "rllib_dqn.py", ["--env-steps", str(steps)],
+                 "RLlib pins gymnasium 1.2.2", timeout_s)
 
 
 def _reverb(duration: str, capacity: str, timeout_s: float) -> dict:
     """The replay peer: Reverb under the load of ``bench shards --shards 1`` (benchmarks/reverb_replay.py)."""
-    root = Path(__file__).resolve().parents[3]
-    python, script = root / ".venv-reverb" / "bin" / "python", root / "benchmarks" / "reverb_replay.py"
-    if not python.exists() or not script.exists():
-        return {"skipped": "no .venv-reverb here: `make bench-reverb` builds it (Reverb needs TensorFlow 2.15, numpy<2)"}
-    print("bench all: reverb ...", file=sys.stderr, flush=True)
-    args = ["--duration", duration, "--capacity", capacity]
-    try:
-        done = subprocess.run([str(python), str(script), *args], capture_output=True, text=True, timeout=timeout_s,
-                              cwd=root, env={**os.environ, "TF_CPP_MIN_LOG_LEVEL": "2"})
-        return {"command": f".venv-reverb/bin/python benchmarks/reverb_replay.py {' '.join(args)}",
-                **_last_json(done.stdout)}
-    except (subprocess.TimeoutExpired, ValueError) as exc:
-        return {"error": f"{type(exc).__name__}: {exc}"}
+    return _peer("reverb", ".venv-reverb", "reverb_replay.py", ["--duration", duration, "--capacity", capacity],
+                 "Reverb needs TensorFlow 2.15, numpy<2", timeout_s, env={"TF_CPP_MIN_LOG_LEVEL": "2"})
 
 
 def _get(d: dict, *path: str):
