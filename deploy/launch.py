@@ -231,6 +231,7 @@ class Run:
                 return self.signals.name
             workers_left = [n for n in self.builder.workers if n not in self.summaries]
             if not workers_left:
+                self._sweep_services()
                 return "done"
             ready, _ = ray.wait(list(self.refs.values()), num_returns=1, timeout=self.cfg.train.log_every_s)
             for ref in ready:
@@ -266,6 +267,26 @@ class Run:
             self.learner_final = result
         else:
             raise LaunchError(f"{name} stopped unexpectedly")
+
+    def _sweep_services(self) -> None:
+        """Before the stop: a service that died in the last moments of the run (its failed run()
+        not yet seen by ``ray.wait``) is found by its process id and counted like any other death,
+        so the summary never reads "restarts none" after a restart, and the stop talks to a running
+        process. Costs one ``info()`` round trip per service."""
+        import ray
+
+        for name in [n for n in self.refs if n not in self.builder.workers]:
+            ready, _ = ray.wait([self.refs[name]], timeout=0)
+            if ready:
+                self._collect(name, ready[0])
+                continue
+            try:
+                where = ray.get(self.handles[name].info.remote(), timeout=self.cfg.deploy.start_timeout_s)
+            except (ray.exceptions.RayActorError, ray.exceptions.GetTimeoutError) as exc:
+                self._restart(name, exc)
+                continue
+            if where.get("pid") != self.where.get(name, {}).get("pid"):
+                self._restart(name, RuntimeError("a new process"))
 
     def _restart(self, name: str, exc: Exception) -> None:
         """The actor's run() failed: wait until Ray has it back, count a death if its process is

@@ -103,6 +103,35 @@ def test_replay_server_killed_after_a_checkpoint_restores_it(tmp_path):
     assert "restored" in log
 
 
+def test_a_service_killed_as_the_workers_finish_is_still_counted(tmp_path, monkeypatch):
+    """The race CI met: the replay server died in the run's last moments, after the workers'
+    results were in but before ``ray.wait`` saw its run() fail, and the summary read "restarts
+    none". Here the kill lands exactly there; the sweep before the stop must find it by its pid."""
+    from laneshift.deploy.launch import Run
+
+    run_dir = tmp_path / "run"
+    sweep, killed = Run._sweep_services, []
+
+    def kill_then_sweep(self: Run) -> None:
+        pid = int((run_dir / "logs" / "replay-server.pid").read_text())
+        os.kill(pid, signal.SIGKILL)
+        killed.append(pid)
+        sweep(self)
+
+    monkeypatch.setattr(Run, "_sweep_services", kill_then_sweep)
+    total = 3000
+    cfg = load_run_config(overrides={**FAST, "train.run_dir": str(run_dir), "train.env_steps": total})
+    out = io.StringIO()
+    assert train_local(cfg, out=out) == 0, out.getvalue()
+    text = out.getvalue()
+    summary = json.loads((run_dir / "summary.json").read_text())
+    replay = json.loads((run_dir / "replay_stats.json").read_text())
+    assert killed and "replay-server died" in text, text
+    assert summary["restarts"] == {"replay-server": 1}, summary["restarts"]
+    stored = replay["tables"]["online"]["inserted"]
+    assert stored + summary["replay"]["lost_items"] == total, (stored, summary["replay"])
+
+
 def test_a_used_run_dir_is_refused_and_a_second_launcher_too(tmp_path):
     run_dir = tmp_path / "run"
     run_dir.mkdir()
