@@ -27,8 +27,8 @@ from __future__ import annotations
 import dataclasses
 import json
 import signal
+import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 from typing import Any, TextIO
@@ -418,28 +418,29 @@ def _not_started(component: str, placement: Any, timeout: float) -> str:
 # ---------------------------------------------------------------------------- entry point
 
 
-class _SpecThread(threading.Thread):
-    """``spec_of(env)`` on a thread; ``result()`` joins it and returns the spec as a plain dict."""
+class _SpecProcess:
+    """``spec_of(env)`` in a child process started now; ``result()`` waits and returns the spec as a
+    plain dict. A child, not a thread: highway-env, gymnasium and pygame (about 80 MB of RSS) then
+    never enter the launcher, which lives as long as the run (docs/performance.md, P8); the child
+    runs beside Ray's start, as the thread did."""
 
-    def __init__(self, env: Any):
-        super().__init__(daemon=True, name="env-spec")
-        self.env, self._spec, self._error = env, None, None
-        self.start()
-
-    def run(self) -> None:
-        from laneshift.actors.envs import spec_of
-        from laneshift.envspec import spec_to_dict
-
-        try:
-            self._spec = spec_to_dict(spec_of(self.env))
-        except Exception as exc:  # noqa: BLE001 - raised again in the caller's thread
-            self._error = exc
+    def __init__(self, cfg: RunConfig):
+        env = {f"env.{k}": v for k, v in cfg.to_dict()["env"].items()}
+        self._proc = subprocess.Popen([sys.executable, "-m", "laneshift.deploy.spec_process", json.dumps(env)],
+                                      stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                      text=True)
 
     def result(self) -> dict:
-        self.join()
-        if self._error is not None:
-            raise self._error
-        return self._spec
+        out, err = self._proc.communicate()
+        if self._proc.returncode != 0:
+            last = [ln for ln in err.strip().splitlines() if ln.strip()] or ["no output"]
+            raise LaunchError(f"the env's spec could not be computed: {last[-1]}")
+        return json.loads(out)
+
+    def close(self) -> None:
+        if self._proc.poll() is None:
+            self._proc.kill()
+            self._proc.wait()
 
 
 def train(cfg: RunConfig, *, address: str | None = None, out: TextIO = sys.stdout, resume: bool = False,
@@ -459,13 +460,14 @@ def train(cfg: RunConfig, *, address: str | None = None, out: TextIO = sys.stdou
     ray_conn = RayConnection(address)
     launcher_cpus = own_cpus()  # Run.start may move this process off the learner's CPU
     run: Run | None = None
+    spec_thread: _SpecProcess | None = None
     rc = 1
     try:
         lock.acquire()
         prepare_run_dir(run_dir, resume, overwrite, out)
         # The env's spec, computed here once while Ray starts (Ray's start is mostly waiting), is
         # shipped to the replay server and the learner, which then build no simulator of their own.
-        spec_thread = _SpecThread(cfg.env)
+        spec_thread = _SpecProcess(cfg)
         ray_conn.open(cfg)  # contacted and authenticated before anything starts
         ray_s = time.monotonic() - started
         signals.install()  # replace Ray's SIGTERM handler (it would abort the cleanup after ~3 s)
@@ -485,6 +487,9 @@ def train(cfg: RunConfig, *, address: str | None = None, out: TextIO = sys.stdou
         if why != "done":
             run._say(f"train: {why} received; stopping gracefully (checkpoints, summary)")
         run.stop()
+        # Their processes end before the summary's greedy eval builds an env here (highway-env,
+        # pygame, matplotlib: about 70 MB): the run's peak memory is then its training's.
+        run.kill_all()
         if run.progress.tty:
             out.write("\n")
         result = summarise(run, why, time.monotonic() - started, out)
@@ -504,6 +509,8 @@ def train(cfg: RunConfig, *, address: str | None = None, out: TextIO = sys.stdou
             run.stop(graceful_s=30)
         rc = 130 if signals.received != signal.SIGTERM else 143
     finally:
+        if spec_thread is not None:
+            spec_thread.close()
         if run is not None:
             run.kill_all()
         ray_conn.close()

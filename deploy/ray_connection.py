@@ -7,6 +7,8 @@ Room: deploy, the wiring. May import: the contract and Ray.
 
 from __future__ import annotations
 
+import contextlib
+import inspect
 import math
 import os
 import shutil
@@ -15,10 +17,38 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
+from typing import Any
 
 from laneshift.config import RunConfig
 
 from .errors import LaunchError
+
+
+@contextlib.contextmanager
+def _without_log_and_autoscaler_monitors() -> Iterator[None]:
+    """A private local cluster without two of Ray's side processes it has no use for: the log
+    monitor (it streams worker logs to the driver; ``log_to_driver=False``, the components write
+    to ``<run dir>/logs``) and the autoscaler monitor (one fixed node). About 160 MB of RSS
+    (docs/performance.md). ``ray start --head`` has both switches (``--include-log-monitor=False``,
+    ``--no-monitor``) but ``ray.init`` has neither, so its parameters are amended as it builds
+    them; Ray is pinned (2.60.0), and a Ray without these fields gets its defaults."""
+    from ray._private import parameter
+
+    init = parameter.RayParams.__init__
+    if not {"include_log_monitor", "no_monitor"} <= set(inspect.signature(init).parameters):
+        yield
+        return
+
+    def lean(self: Any, *args: Any, **kwargs: Any) -> None:
+        init(self, *args, **kwargs)
+        self.include_log_monitor, self.no_monitor = False, True
+
+    parameter.RayParams.__init__ = lean
+    try:
+        yield
+    finally:
+        parameter.RayParams.__init__ = init
 
 
 class RayConnection:
@@ -54,9 +84,10 @@ class RayConnection:
             for k, v in d.worker_resources.items():
                 resources[k] = resources.get(k, 0.0) + v * cfg.actor.workers
             resources.pop("GPU", None)
-            ray.init(num_cpus=max(math.ceil(cpus), 1), resources=resources or None, include_dashboard=False,
-                     _temp_dir=self.temp_dir, _node_ip_address="127.0.0.1", log_to_driver=False,
-                     configure_logging=False)
+            with _without_log_and_autoscaler_monitors():
+                ray.init(num_cpus=max(math.ceil(cpus), 1), resources=resources or None, include_dashboard=False,
+                         _temp_dir=self.temp_dir, _node_ip_address="127.0.0.1", log_to_driver=False,
+                         configure_logging=False)
             return self
         if not self.address.startswith("ray://"):
             _probe_gcs(self.address)

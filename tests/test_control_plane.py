@@ -319,3 +319,18 @@ def test_local_mode_moves_the_launcher_and_its_processes_off_the_learners_cpu():
     assert out[4] == str([cpus[-1]]), out
     assert out[5] == str(cpus), out  # the skipped process (the learner's) keeps its CPUs
     assert out[6] == str(cpus), out  # and the launcher gets its CPUs back after the run, every thread
+
+
+def test_the_envs_spec_comes_from_a_child_process_and_its_failure_is_one_line():
+    """The launcher keeps no simulator: the spec is computed in a child (deploy.spec_process), and
+    is the same as computed here; a config whose env cannot be built fails with its last line."""
+    from laneshift.actors.envs import spec_of
+    from laneshift.deploy.errors import LaunchError
+    from laneshift.deploy.launch import _SpecProcess
+    from laneshift.envspec import spec_to_dict
+
+    cfg = load_run_config(overrides={"env.scenario": "lka"})
+    assert _SpecProcess(cfg).result() == spec_to_dict(spec_of(cfg.env))
+    bad = load_run_config(overrides={"env.scenario": "laneshift/NoSuchEnv-v0"})
+    with pytest.raises(LaunchError, match=r"^the env's spec could not be computed: .*NoSuchEnv"):
+        _SpecProcess(bad).result()
