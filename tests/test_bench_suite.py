@@ -17,7 +17,7 @@ def _shard_row(shards: int, per_s: float) -> dict:
 def test_derive_computes_each_target_from_the_benchmarks():
     r = {"learner": {"cases": [{"name": "mlp-b256", "bare": {"updates_per_s": 150.0}, "learner_over_bare": 0.95,
                                 "learner_over_bare_cpu": 0.97}]},
-         "run": {"training_env_steps_per_s": 960.0, "peak_tree_rss_mb": 1800, "peak_tree_pss_mb": 1300,
+         "run": {"training_env_steps_per_s": 960.0, "steady_env_steps_per_s": 1080.0, "peak_tree_rss_mb": 1800, "peak_tree_pss_mb": 1300,
                  "first_stored_s": 14.0},
          "peers": {"rllib": {"env_steps_per_s": 80.0, "peak_tree_rss_mb": 2000},
                    "reverb": {"ingest_per_s": 1e4, "sample_idle": {"p99_ms": 30.0}}},
@@ -25,7 +25,7 @@ def test_derive_computes_each_target_from_the_benchmarks():
          "ingest_1024": {"rows": [_shard_row(1, 1.05e6)]}}
     t = derive(r)
     assert t["p1_bound_env_steps_per_s"] == 150.0 * 256 / 32 == 1200.0
-    assert t["p1_fraction_of_bound"] == 0.8
+    assert t["p1_fraction_of_bound"] == 0.9 and t["p1_whole_training_fraction_of_bound"] == 0.8
     assert t["vs_rllib_env_steps"] == 12.0 and t["vs_rllib_rss"] == 0.9
     assert t["p2_ingest_per_s_1024_per_message"] == 1.05e6
     assert t["vs_reverb_ingest"] == 20.0 and t["reverb_sample_p99_idle_ms"] == 30.0
@@ -41,3 +41,28 @@ def test_derive_leaves_null_what_did_not_run():
     assert t["p1_fraction_of_bound"] is None and t["vs_rllib_env_steps"] is None
     assert t["p2_ingest_per_s_1024_per_message"] is None and t["p7_shards"] == []
     assert t["vs_reverb_ingest"] is None and t["reverb_ingest_per_s"] is None
+
+
+def test_training_rate_reads_the_whole_of_training_and_its_last_two_thirds(tmp_path):
+    import json
+
+    from laneshift.bench.run import training_rate
+
+    # 0-10 s: a slow ramp (100 env steps/s); 10-30 s: steady at 1,000/s, 125 updates/s.
+    recs = [{"kind": "learner", "time": 100.0 + t, "env_steps": 100 * t if t <= 10 else 1000 + 1000 * (t - 10),
+             "updates": 0 if t <= 10 else 125 * (t - 10)} for t in range(0, 31)]
+    recs.insert(0, {"kind": "learner", "time": 99.0, "env_steps": 0, "updates": 0})  # before any env step: left out
+    recs.insert(5, {"kind": "worker", "time": 104.5})
+    (tmp_path / "metrics.jsonl").write_text("\n".join(json.dumps(r) for r in recs) + "\n")
+    r = training_rate(tmp_path)
+    assert r["training_s"] == 29.0 and r["training_env_steps_per_s"] == round((21000 - 100) / 29, 1)
+    assert r["steady_s"] == 19.0 and r["steady_env_steps_per_s"] == 1000.0 and r["steady_updates_per_s"] == 125.0
+
+
+def test_bench_run_refuses_a_run_dir_of_its_own():
+    import pytest
+
+    from laneshift.bench.run import bench_run
+
+    with pytest.raises(SystemExit, match="must not hold --run-dir"):
+        bench_run("--workers 2 --run-dir=/tmp/somewhere")

@@ -421,7 +421,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     register_bench_run(bench_sub)
     register_bench_worker(bench_sub)
+    from laneshift.bench.p1 import register as register_bench_p1
     from laneshift.bench.shards import register as register_bench_shards
+
+    register_bench_p1(bench_sub)
 
     register_bench_shards(bench_sub)
     from laneshift.bench.suite import register as register_bench_all

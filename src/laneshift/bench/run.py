@@ -156,6 +156,9 @@ class FirstInsert(threading.Thread):
 
 
 def bench_run(train_args: str, timeout_s: float = 900.0) -> dict:
+    if any(arg.split("=")[0] == "--run-dir" for arg in shlex.split(train_args)):
+        # argparse keeps the last --run-dir: the run would go there and its result be lost.
+        raise SystemExit("bench run: --train-args must not hold --run-dir (each run gets a fresh one of its own)")
     run_dir = Path(tempfile.mkdtemp(prefix="lsbench-")) / "run"
     cmd = [sys.executable, "-m", "laneshift", "train", "--local", "--run-dir", str(run_dir), *shlex.split(train_args)]
     started = time.monotonic()
@@ -219,8 +222,17 @@ def training_rate(run_dir: Path) -> dict:
     if len(recs) < 2 or recs[-1][0] <= recs[0][0]:
         return {}
     span = recs[-1][0] - recs[0][0]
-    return {"training_s": round(span, 1), "training_env_steps_per_s": round((recs[-1][1] - recs[0][1]) / span, 1),
-            "training_updates_per_s": round((recs[-1][2] - recs[0][2]) / span, 1)}
+    out = {"training_s": round(span, 1), "training_env_steps_per_s": round((recs[-1][1] - recs[0][1]) / span, 1),
+           "training_updates_per_s": round((recs[-1][2] - recs[0][2]) / span, 1)}
+    # The steady state: the last two thirds of training, past the ramp (replay filling to
+    # min_size, the first weights reaching the workers, the rate limiter finding its pace).
+    third = next(r for r in recs if r[0] >= recs[0][0] + span / 3)
+    if recs[-1][0] > third[0]:
+        steady = recs[-1][0] - third[0]
+        out.update({"steady_s": round(steady, 1),
+                    "steady_env_steps_per_s": round((recs[-1][1] - third[1]) / steady, 1),
+                    "steady_updates_per_s": round((recs[-1][2] - third[2]) / steady, 1)})
+    return out
 
 
 def render(r: dict) -> str:
@@ -229,7 +241,8 @@ def render(r: dict) -> str:
     lines = [f"laneshift train --local {r['train_args']}",
              f"  first transition stored {r['first_stored_s']} s after the command ({r['startup_line']}); run {r['run_s']} s, "
              f"{r['env_steps_per_s']} env steps/s overall; while training {r.get('training_env_steps_per_s')} env steps/s, "
-             f"{r.get('training_updates_per_s')} updates/s ({r['updates']} updates)",
+             f"{r.get('training_updates_per_s')} updates/s ({r['updates']} updates); last two thirds of training "
+             f"{r.get('steady_env_steps_per_s')} env steps/s, {r.get('steady_updates_per_s')} updates/s",
              f"  peak process tree: RSS {r['peak_tree_rss_mb']} MB, PSS {r['peak_tree_pss_mb']} MB",
              f"  {'process':<28}{'count':>6}{'peak RSS MB':>13}{'peak PSS MB':>13}"]
     for label, p in r["processes"].items():

@@ -37,11 +37,11 @@ def _last_json(text: str) -> dict:
     return json.loads(text[start + 1:] if start >= 0 else text)
 
 
-def _bench(name: str, args: list[str], timeout_s: float) -> dict:
+def _bench(name: str, args: list[str], timeout_s: float, said_by: str = "bench all") -> dict:
     """One ``laneshift bench NAME --json`` in its own process: its JSON, or why there is none."""
     cmd = [sys.executable, "-m", "laneshift", "bench", name, *args, "--json"]
     started = time.monotonic()
-    print(f"bench all: {name} ...", file=sys.stderr, flush=True)
+    print(f"{said_by}: {name} ...", file=sys.stderr, flush=True)
     try:
         done = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s,
                               env={**os.environ, "LANESHIFT_PROGRESS": "0"})
@@ -51,7 +51,7 @@ def _bench(name: str, args: list[str], timeout_s: float) -> dict:
         result = _last_json(done.stdout)
     except ValueError:
         return {"error": f"rc {done.returncode}, no JSON", "stderr_tail": done.stderr[-600:], "command": " ".join(cmd[1:])}
-    print(f"bench all: {name} done in {time.monotonic() - started:.0f} s", file=sys.stderr, flush=True)
+    print(f"{said_by}: {name} done in {time.monotonic() - started:.0f} s", file=sys.stderr, flush=True)
     return {"command": "laneshift " + " ".join(cmd[3:]), **result}
 
 
@@ -104,13 +104,15 @@ def derive(r: dict) -> dict:
     run, peer = r["run"], r["peers"]["rllib"]
     ratio = 32.0  # replay.samples_per_insert of the run, and the batch of 256: one update per 8 env steps
     bound = bare * 256 / ratio if bare else None
-    ours = run.get("training_env_steps_per_s")
+    ours = run.get("training_env_steps_per_s")  # the whole of training, as RLlib's figure is read
+    steady = run.get("steady_env_steps_per_s")  # its last two thirds: P1 (bench p1 repeats it in rounds)
     theirs = peer.get("env_steps_per_s") if isinstance(peer, dict) else None
     return {
         "p5_learner_over_bare": round(learner["learner_over_bare"], 2) if learner.get("learner_over_bare") else None,
         "p5_learner_over_bare_cpu": round(learner["learner_over_bare_cpu"], 2) if learner.get("learner_over_bare_cpu") else None,
-        "p1_env_steps_per_s": ours, "p1_bound_env_steps_per_s": round(bound, 1) if bound else None,
-        "p1_fraction_of_bound": round(ours / bound, 2) if ours and bound else None,
+        "p1_env_steps_per_s": steady, "p1_bound_env_steps_per_s": round(bound, 1) if bound else None,
+        "p1_fraction_of_bound": round(steady / bound, 2) if steady and bound else None,
+        "p1_whole_training_fraction_of_bound": round(ours / bound, 2) if ours and bound else None,
         "p8_peak_tree_rss_mb": run.get("peak_tree_rss_mb"), "p8_peak_tree_pss_mb": run.get("peak_tree_pss_mb"),
         "startup_first_stored_s": run.get("first_stored_s"),
         "vs_rllib_env_steps": round(ours / theirs, 1) if ours and theirs else None,

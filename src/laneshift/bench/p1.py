@@ -1,0 +1,105 @@
+"""``laneshift bench p1``: a whole run's env steps/s against the bound its learner allows (P1).
+
+At replay ratio R (``replay.samples_per_insert``) and batch B, a run can make at most
+``bare updates/s x B / R`` env steps/s, where ``bare updates/s`` is a bare torch loop's rate with
+the same network, batch and optimizer (``laneshift bench learner``, case mlp-b256). This machine's
+speed drifts from minute to minute (up to 2x), so a bound measured once says little about a run
+measured ten minutes later: the bare loop runs before every run and after the last (bare, run,
+bare, run, bare), and each run is set against the mean of the two measurements beside it.
+
+A run's rate is read from its learner's ``metrics.jsonl`` (``bench run``): over the whole of
+training, and over its last two thirds (the steady state, past the replay's fill to min_size and
+the first weights' trip to the workers). Both fractions are reported; the steady one is P1.
+
+    laneshift bench p1                               # 2 rounds of 40,000 env steps at ratio 32
+    laneshift bench p1 --rounds 3 --json
+    laneshift bench p1 --train-args "--workers 2 --set actor.envs_per_worker=4"
+
+Room: the tools (benchmarks). May import: anything in laneshift.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+from typing import Any
+
+from .run import bench_run
+from .suite import _bench
+
+BATCH = 256  # learner.batch_size's default, and the bare case's (mlp-b256)
+
+
+def bare_updates_per_s(seconds: float) -> float | None:
+    """The bare torch loop's updates/s (``bench learner --cases mlp-b256``, its own process)."""
+    r = _bench("learner", ["--cases", "mlp-b256", "--seconds", str(seconds), "--rounds", "2"], 600, said_by="bench p1")
+    case = next((c for c in r.get("cases") or [] if c.get("name") == "mlp-b256"), {})
+    return (case.get("bare") or {}).get("updates_per_s")
+
+
+def bench_p1(rounds: int = 2, env_steps: int = 40_000, ratio: float = 32.0, train_args: str = "--workers 2",
+             seconds: float = 3.0) -> dict:
+    if rounds < 1:
+        raise SystemExit("bench p1: --rounds must be at least 1")
+    args = f"--scenario straight {train_args} --env-steps {env_steps} --set replay.samples_per_insert={ratio:g}"
+    bares = [bare_updates_per_s(seconds)]
+    rows: list[dict[str, Any]] = []
+    for i in range(rounds):
+        run = bench_run(args)
+        bares.append(bare_updates_per_s(seconds))
+        before, after = bares[i], bares[i + 1]
+        row: dict[str, Any] = {"round": i + 1, "rc": run.get("rc"), "bare_before": before, "bare_after": after}
+        if before and after and run.get("rc") == 0:
+            bound = statistics.fmean([before, after]) * BATCH / ratio
+            steady, whole = run.get("steady_env_steps_per_s"), run.get("training_env_steps_per_s")
+            row.update({"bound_env_steps_per_s": round(bound, 1), "steady_env_steps_per_s": steady,
+                        "steady_updates_per_s": run.get("steady_updates_per_s"),
+                        "training_env_steps_per_s": whole,
+                        "steady_fraction": round(steady / bound, 2) if steady else None,
+                        "whole_fraction": round(whole / bound, 2) if whole else None,
+                        "peak_tree_rss_mb": run.get("peak_tree_rss_mb")})
+        else:
+            row["error"] = run.get("error") or "a bare loop measurement failed"
+        rows.append(row)
+    steady = [r["steady_fraction"] for r in rows if r.get("steady_fraction")]
+    whole = [r["whole_fraction"] for r in rows if r.get("whole_fraction")]
+    return {"train_args": args, "ratio": ratio, "batch": BATCH, "rounds": rows,
+            "p1_steady_fraction": {"min": min(steady), "median": statistics.median(steady), "max": max(steady)}
+            if steady else None,
+            "p1_whole_fraction": {"min": min(whole), "median": statistics.median(whole), "max": max(whole)}
+            if whole else None}
+
+
+def render(r: dict) -> str:
+    lines = [f"laneshift train --local {r['train_args']}  (bound = bare updates/s x {r['batch']} / {r['ratio']:g})",
+             f"  {'round':>5} {'bare before':>12} {'bare after':>11} {'bound':>8} {'steady':>8} {'of bound':>9} "
+             f"{'whole':>8} {'of bound':>9}"]
+    for row in r["rounds"]:
+        if "error" in row:
+            lines.append(f"  {row['round']:>5} {row['error']}")
+            continue
+        lines.append(f"  {row['round']:>5} {row['bare_before']:>12} {row['bare_after']:>11} {row['bound_env_steps_per_s']:>8} "
+                     f"{row['steady_env_steps_per_s']:>8} {row['steady_fraction']:>9} {row['training_env_steps_per_s']:>8} "
+                     f"{row['whole_fraction']:>9}")
+    lines.append(f"  P1 (steady, last two thirds of training): {r['p1_steady_fraction']}; whole window: {r['p1_whole_fraction']}")
+    return "\n".join(lines)
+
+
+def bench_p1_main(args: argparse.Namespace) -> int:
+    result = bench_p1(args.rounds, args.env_steps, args.ratio, args.train_args, args.seconds)
+    print(json.dumps(result, indent=2) if args.json else render(result))
+    return 0 if all("error" not in r for r in result["rounds"]) else 1
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("p1", help="a whole run's env steps/s against its learner's bound, the bare loop measured "
+                                  "before and after every run", formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p.add_argument("--rounds", type=int, default=2, help="runs, each between two bare-loop measurements")
+    p.add_argument("--env-steps", type=int, default=40_000, help="each run's budget")
+    p.add_argument("--ratio", type=float, default=32.0, help="replay.samples_per_insert of the runs")
+    p.add_argument("--train-args", default="--workers 2",
+                   help="more arguments for `laneshift train --local` (not --run-dir, --env-steps)")
+    p.add_argument("--seconds", type=float, default=3.0, help="seconds per bare-loop measurement")
+    p.add_argument("--json", action="store_true", help="print the result as one JSON object")
+    p.set_defaults(func=bench_p1_main)
