@@ -75,6 +75,7 @@ class WorkerSummary:
     bad_weights: int
     first_weights_sha256: str  # digest of the first weights acted with (rehearsal: the phase-1 network)
     wall_s: float
+    rate_limited_s: float = 0.0  # blocked by the replay's rate limiter: the learner bounds the run
 
     def as_dict(self) -> dict:
         """JSON-ready; ``versions_used`` (one entry per batch sent, 23k for a 750k-step worker)
@@ -185,9 +186,12 @@ class EnvWorker:
         iters = max(1, -(-self.cfg.send_every // n_envs))
         pending = [NStepAccumulator(self.n_step, self.gamma) for _ in self.envs]
         items: list[NStepItem] = []
+        rate_limited_s = 0.0
         while steps < env_steps and not links.stop_requested():
             if not self.sync:  # sync is paced by the learner's rounds already
+                waited = time.monotonic()
                 links.wait_insert_ok()
+                rate_limited_s += time.monotonic() - waited
             for _ in range(iters):
                 eps = epsilon(steps)
                 actions = self.policy.act(obs, eps)
@@ -231,11 +235,12 @@ class EnvWorker:
                     break
             else:
                 self._apply(links.latest_weights())
-        return self._summary(steps, episodes, seq, versions, started)
+        return self._summary(steps, episodes, seq, versions, started, rate_limited_s)
 
-    def _summary(self, steps: int, episodes: int, batches: int, versions: list[int], started: float) -> WorkerSummary:
+    def _summary(self, steps: int, episodes: int, batches: int, versions: list[int], started: float,
+                 rate_limited_s: float = 0.0) -> WorkerSummary:
         return WorkerSummary(self.name, steps, episodes, batches, versions, self.weight_updates, self.bad_weights,
-                             self.first_weights_sha256, round(time.monotonic() - started, 3))
+                             self.first_weights_sha256, round(time.monotonic() - started, 3), round(rate_limited_s, 3))
 
     def close(self) -> None:
         for env in self.envs:

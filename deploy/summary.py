@@ -12,6 +12,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
 if TYPE_CHECKING:  # pragma: no cover
+    from laneshift.config import RunConfig
+
     from .launch import Run
 
 
@@ -48,6 +50,7 @@ def summarise(run: Run, why: str, wall: float, out: TextIO) -> dict:
         f"{lost_batches} batches ({lost_items} items) lost and counted",
         f"restarts        " + (", ".join(f"{k} {v}" for k, v in run.deaths.items()) or "none"),
         f"learner         {last.get('updates', 0):,} updates, final weights version {last.get('version', 0)}",
+        *_waits(cfg, summaries, last),
         *([f"stopped early   episode {last['stop_reason']['episode']} returned {last['stop_reason']['return']:.3f}"
            f" >= train.stop_return {cfg.train.stop_return} after {last['stop_reason']['elapsed_s']} s"]
           if last.get("stop_reason") else []),
@@ -70,6 +73,20 @@ def summarise(run: Run, why: str, wall: float, out: TextIO) -> dict:
     lines += [f"run dir         {run_dir}", f"checkpoint      {final}", f"tensorboard     {_tensorboard_command()} --logdir {run_dir / 'tb'}"]
     print("\n".join(lines), file=out, flush=True)
     return result
+
+
+def _waits(cfg: RunConfig, summaries: list[dict], last: dict) -> list[str]:
+    """Which side bounded the run: the workers' time blocked by the replay's rate limiter (the
+    learner was behind the ratio) against the learner's time waiting for a sampled batch (the
+    workers or the replay were behind). Async mode only: sync rounds wait by design."""
+    if cfg.train.parallel != "async" or not summaries or not last.get("elapsed_s"):
+        return []
+    workers = sum(s.get("rate_limited_s", 0.0) for s in summaries) / max(sum(s["wall_s"] for s in summaries), 1e-6)
+    learner = float(last.get("sample_wait_s") or 0.0) / max(float(last["elapsed_s"]), 1e-6)
+    which = ("the learner bounded the run" if workers > learner + 0.05
+             else "the workers bounded the run" if learner > workers + 0.05 else "the two were about even")
+    return [f"waits           workers {workers:.0%} of their time on the rate limiter, learner {learner:.0%} "
+            f"waiting for samples: {which}"]
 
 
 def _tensorboard_command() -> str:

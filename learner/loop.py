@@ -93,6 +93,7 @@ class Learner:
         self.started = time.monotonic()
         self._updates_at_last_log, self._steps_at_last_log, self._time_at_last_log = 0, 0, time.monotonic()
         self.last_status: dict = {}
+        self.sample_wait_s = self._wait_at_last_log = 0.0  # the update thread's time waiting on a batch
         self.checkpoint_failures = 0  # writes that failed (full disk, read-only dir): counted, retried later
         self._last_state_save = time.monotonic()
         self.restored_from: dict | None = self._restore()
@@ -298,7 +299,9 @@ class Learner:
         if self.prefetcher is None:  # the next request is asked for while a batch trains (prefetch.py)
             self.prefetcher = Prefetcher(self.links.sample,
                                          lambda: wire.SampleRequest(self.lcfg.batch_size, self.lcfg.prefetch), self.stop)
+        waited = time.monotonic()
         batch = self.prefetcher.take(timeout=0.5)  # refusals are waited out on the prefetch thread
+        self.sample_wait_s += time.monotonic() - waited  # the update thread idle: the actors bound the run
         if batch is None:
             return
         before = self.agent.updates
@@ -377,11 +380,16 @@ class Learner:
         actors = self.replay_stats.get("actors", {})  # the first few actors; totals below cover all
         env_steps = int(self.replay_stats.get("actors_total", {}).get("env_steps", 0))
         steps_per_s = (env_steps - self._steps_at_last_log) / dt
+        wait_share = (self.sample_wait_s - self._wait_at_last_log) / dt
         self._updates_at_last_log, self._steps_at_last_log, self._time_at_last_log = self.agent.updates, env_steps, now
+        self._wait_at_last_log = self.sample_wait_s
         return {
             "updates": self.agent.updates, "updates_per_s": round(ups, 1), "version": self.version,
             "phase": self.phase, "episodes": self.episodes, "bad_episode_records": self.bad_episode_records,
             "env_steps": env_steps, "env_steps_per_s": round(steps_per_s, 1),
+            # Share of the interval the update thread waited for a sampled batch (async mode): near 0
+            # when the learner bounds the run, large when the actors (or the replay) do.
+            "sample_wait_share": round(min(wait_share, 1.0), 3), "sample_wait_s": round(self.sample_wait_s, 2),
             "return_mean": float(np.mean(self.returns)) if self.returns else None,
             "length_mean": float(np.mean(self.lengths)) if self.lengths else None,
             "crash_rate": float(np.mean(self.crashes)) if self.crashes else None,

@@ -66,3 +66,21 @@ def test_bench_run_refuses_a_run_dir_of_its_own():
 
     with pytest.raises(SystemExit, match="must not hold --run-dir"):
         bench_run("--workers 2 --run-dir=/tmp/somewhere")
+
+
+def test_the_waits_say_which_side_bounded_the_run():
+    from laneshift.bench.run import wait_shares
+    from laneshift.config import load_run_config
+    from laneshift.deploy.summary import _waits
+
+    workers = [{"name": "w0", "env_steps": 10, "wall_s": 10.0, "rate_limited_s": 6.0},
+               {"name": "w1", "env_steps": 10, "wall_s": 10.0, "rate_limited_s": 7.0}]
+    learner = {"sample_wait_s": 0.5, "elapsed_s": 10.0}
+    assert wait_shares({"workers": workers, "learner": learner}) == {"workers_rate_limited_share": 0.65,
+                                                                     "learner_sample_wait_share": 0.05}
+    line = _waits(load_run_config(), workers, learner)
+    assert line == ["waits           workers 65% of their time on the rate limiter, learner 5% waiting for samples: "
+                    "the learner bounded the run"]
+    assert "the workers bounded the run" in _waits(load_run_config(), [dict(workers[0], rate_limited_s=0.1)],
+                                                   {"sample_wait_s": 4.0, "elapsed_s": 10.0})[0]
+    assert _waits(load_run_config(overrides={"train.parallel": "sync"}), workers, learner) == []  # sync waits by design

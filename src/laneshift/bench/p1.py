@@ -38,6 +38,10 @@ def bare_updates_per_s(seconds: float) -> float | None:
     return (case.get("bare") or {}).get("updates_per_s")
 
 
+def _r(x: float | None) -> float | None:
+    return round(x, 1) if x is not None else None
+
+
 def bench_p1(rounds: int = 2, env_steps: int = 40_000, ratio: float = 32.0, train_args: str = "--workers 2",
              seconds: float = 3.0) -> dict:
     if rounds < 1:
@@ -49,7 +53,7 @@ def bench_p1(rounds: int = 2, env_steps: int = 40_000, ratio: float = 32.0, trai
         run = bench_run(args)
         bares.append(bare_updates_per_s(seconds))
         before, after = bares[i], bares[i + 1]
-        row: dict[str, Any] = {"round": i + 1, "rc": run.get("rc"), "bare_before": before, "bare_after": after}
+        row: dict[str, Any] = {"round": i + 1, "rc": run.get("rc"), "bare_before": _r(before), "bare_after": _r(after)}
         if before and after and run.get("rc") == 0:
             bound = statistics.fmean([before, after]) * BATCH / ratio
             steady, whole = run.get("steady_env_steps_per_s"), run.get("training_env_steps_per_s")
@@ -58,6 +62,8 @@ def bench_p1(rounds: int = 2, env_steps: int = 40_000, ratio: float = 32.0, trai
                         "training_env_steps_per_s": whole,
                         "steady_fraction": round(steady / bound, 2) if steady else None,
                         "whole_fraction": round(whole / bound, 2) if whole else None,
+                        "workers_rate_limited_share": run.get("workers_rate_limited_share"),
+                        "learner_sample_wait_share": run.get("learner_sample_wait_share"),
                         "peak_tree_rss_mb": run.get("peak_tree_rss_mb")})
         else:
             row["error"] = run.get("error") or "a bare loop measurement failed"
@@ -71,17 +77,22 @@ def bench_p1(rounds: int = 2, env_steps: int = 40_000, ratio: float = 32.0, trai
             if whole else None}
 
 
+def _pct(x: float | None) -> str:
+    return f"{x:.0%}" if x is not None else "-"
+
+
 def render(r: dict) -> str:
     lines = [f"laneshift train --local {r['train_args']}  (bound = bare updates/s x {r['batch']} / {r['ratio']:g})",
              f"  {'round':>5} {'bare before':>12} {'bare after':>11} {'bound':>8} {'steady':>8} {'of bound':>9} "
-             f"{'whole':>8} {'of bound':>9}"]
+             f"{'whole':>8} {'of bound':>9} {'workers limited':>16} {'learner waits':>14}"]
     for row in r["rounds"]:
         if "error" in row:
             lines.append(f"  {row['round']:>5} {row['error']}")
             continue
         lines.append(f"  {row['round']:>5} {row['bare_before']:>12} {row['bare_after']:>11} {row['bound_env_steps_per_s']:>8} "
                      f"{row['steady_env_steps_per_s']:>8} {row['steady_fraction']:>9} {row['training_env_steps_per_s']:>8} "
-                     f"{row['whole_fraction']:>9}")
+                     f"{row['whole_fraction']:>9} {_pct(row.get('workers_rate_limited_share')):>16} "
+                     f"{_pct(row.get('learner_sample_wait_share')):>14}")
     lines.append(f"  P1 (steady, last two thirds of training): {r['p1_steady_fraction']}; whole window: {r['p1_whole_fraction']}")
     return "\n".join(lines)
 
