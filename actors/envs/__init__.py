@@ -25,10 +25,16 @@ if TYPE_CHECKING:
     from laneshift.config import EnvConfig
     from laneshift.envspec import EnvSpec
 
-from .actions import META_ACTIONS, PAPER_ACTIONS, paper_action_index
-from .rewards import REWARD_PRESETS, RewardPreset, compute_reward
+from .deferred_imports import defer_unused_imports, load_deferred
 
-from laneshift.envspec import SCENARIOS  # scenario name -> gymnasium id (the contract's)
+# Before highway-env is imported (by the env modules gym.make loads): pandas and pyplot, which it
+# imports and laneshift's envs never use, stay unloaded until touched (deferred_imports.py).
+defer_unused_imports()
+
+from .actions import META_ACTIONS, PAPER_ACTIONS, paper_action_index  # noqa: E402
+from .rewards import REWARD_PRESETS, RewardPreset, compute_reward  # noqa: E402
+
+from laneshift.envspec import SCENARIOS  # noqa: E402 - scenario name -> gymnasium id (the contract's)
 
 _ENTRY_POINTS: dict[str, str] = {
     "laneshift/StraightLaneChange-v0": "laneshift.actors.envs.lane_change:StraightLaneChangeEnv",
@@ -59,6 +65,8 @@ def make_env(scenario_or_id: str, **kwargs: Any) -> gym.Env:
             f"scenario_or_id: unknown {scenario_or_id!r}; expected one of {sorted(SCENARIOS)} "
             "or a registered gymnasium id"
         )
+    if env_id not in _ENTRY_POINTS:  # a stock env may use pandas (its Kinematics observation)
+        load_deferred()
     return gym.make(env_id, **kwargs)
 
 
