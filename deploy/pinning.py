@@ -4,7 +4,7 @@ The launcher makes the default (-2, auto) concrete (``resolve_learner_core``). T
 Each component process pins itself when it starts (``pin_process``: the learner to its CPU, any
 other component to the node's other CPUs). In local mode the launcher also moves
 itself and every Ray process it started off the learner's CPU once the components run
-(``pin_process_tree``): the GCS, the raylet, the dashboard and its agents, the monitors. Ray
+(``pin_process_tree``): the GCS, the raylet, the dashboard and its agents. Ray
 workers started later (a restarted component) are the raylet's children and inherit its mask, so
 the learner's CPU runs the learner alone; a restarted learner pins itself back onto it.
 
