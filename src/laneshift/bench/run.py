@@ -104,8 +104,11 @@ class TreeSampler(threading.Thread):
             p = _read_kb(f"/proc/{pid}/smaps_rollup", "Pss:")
             rss, pss, n = rss + r, pss + p, n + 1
             seen = self.per_process.setdefault(pid, {"label": "?", "rss_kb": 0, "pss_kb": 0})
-            # Again each time: a Ray worker is "default_worker.py" until it becomes an actor.
-            seen["label"] = self.label(pid, self.root)
+            # Again each time: a Ray worker is "default_worker.py" until it becomes an actor. An
+            # ending process (a zombie has no command line) keeps the name it had.
+            label = self.label(pid, self.root)
+            if label != "?" or seen["label"] == "?":
+                seen["label"] = label
             seen["rss_kb"], seen["pss_kb"] = max(seen["rss_kb"], r), max(seen["pss_kb"], p)
         self.peak_rss_kb, self.peak_pss_kb = max(self.peak_rss_kb, rss), max(self.peak_pss_kb, pss)
         self.max_processes = max(self.max_processes, n)
