@@ -460,14 +460,14 @@ def train(cfg: RunConfig, *, address: str | None = None, out: TextIO = sys.stdou
     ray_conn = RayConnection(address)
     launcher_cpus = own_cpus()  # Run.start may move this process off the learner's CPU
     run: Run | None = None
-    spec_thread: _SpecProcess | None = None
+    spec_child: _SpecProcess | None = None
     rc = 1
     try:
         lock.acquire()
         prepare_run_dir(run_dir, resume, overwrite, out)
         # The env's spec, computed here once while Ray starts (Ray's start is mostly waiting), is
         # shipped to the replay server and the learner, which then build no simulator of their own.
-        spec_thread = _SpecProcess(cfg)
+        spec_child = _SpecProcess(cfg)
         ray_conn.open(cfg)  # contacted and authenticated before anything starts
         ray_s = time.monotonic() - started
         signals.install()  # replace Ray's SIGTERM handler (it would abort the cleanup after ~3 s)
@@ -479,7 +479,7 @@ def train(cfg: RunConfig, *, address: str | None = None, out: TextIO = sys.stdou
         cfg = cfg.replace(deploy=dataclasses.replace(  # auto -> a CPU in local mode, off on a cluster
             cfg.deploy, learner_core=resolve_learner_core(cfg.deploy.learner_core, local=address is None)))
         run = Run(cfg, local=address is None, out=out, signals=signals)
-        run.env_spec = spec_thread.result()
+        run.env_spec = spec_child.result()
         run.start()
         run._say(f"train: started in {time.monotonic() - started:.1f} s (Ray {ray_s:.1f} s, router "
                  f"{run.timeline['router']:.1f} s, replay server, learner and workers {run.timeline['rest']:.1f} s)")
@@ -509,8 +509,8 @@ def train(cfg: RunConfig, *, address: str | None = None, out: TextIO = sys.stdou
             run.stop(graceful_s=30)
         rc = 130 if signals.received != signal.SIGTERM else 143
     finally:
-        if spec_thread is not None:
-            spec_thread.close()
+        if spec_child is not None:
+            spec_child.close()
         if run is not None:
             run.kill_all()
         ray_conn.close()

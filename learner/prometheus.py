@@ -19,7 +19,9 @@ from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily
 #: status key -> (metric name, help); counters only grow over a run (resumes included).
 COUNTERS = {"updates": ("laneshift_learner_updates_total", "gradient updates made"),
             "env_steps": ("laneshift_learner_env_steps_total", "env steps the run has made (the TensorBoard step)"),
-            "episodes": ("laneshift_learner_episodes_total", "episodes the workers reported")}
+            "episodes": ("laneshift_learner_episodes_total", "episodes the workers reported"),
+            "sample_wait_s": ("laneshift_learner_sample_wait_seconds_total",
+                              "seconds the update thread waited for a sampled batch (the actors were behind)")}
 GAUGES = {"loss": ("laneshift_learner_loss", "TD loss of the newest update"),
           "q_mean": ("laneshift_learner_q_mean", "mean Q of the batch's taken actions, newest update"),
           "td_abs": ("laneshift_learner_td_abs", "mean |TD error| of the newest update"),
@@ -27,6 +29,8 @@ GAUGES = {"loss": ("laneshift_learner_loss", "TD loss of the newest update"),
           "margin_loss": ("laneshift_learner_margin_loss", "large-margin imitation loss, newest update"),
           "bc_loss": ("laneshift_learner_bc_loss", "cross-entropy imitation loss, newest update"),
           "updates_per_s": ("laneshift_learner_updates_per_second", "updates per second over the last log interval"),
+          "sample_wait_share": ("laneshift_learner_sample_wait_ratio",
+                                "share of the last log interval the update thread waited for a sampled batch"),
           "version": ("laneshift_learner_weights_version", "newest weights version published"),
           "phase": ("laneshift_learner_phase", "1: demo-only pre-training, 2 or 0: online"),
           "return_mean": ("laneshift_learner_episode_return_mean", "mean return of the last 100 episodes"),

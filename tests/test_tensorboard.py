@@ -289,7 +289,8 @@ def test_learner_prometheus_endpoint_serves_its_status():
     server = LearnerMetricsServer("127.0.0.1", 0)
     try:
         server.update({"updates": 12, "env_steps": 3400, "episodes": 7, "loss": 0.25, "q_mean": -1.5,
-                       "version": 3, "phase": 0, "version_lag": {"w0": 1, "w1": 0}, "return_mean": None})
+                       "version": 3, "phase": 0, "version_lag": {"w0": 1, "w1": 0}, "return_mean": None,
+                       "sample_wait_s": 1.5, "sample_wait_share": 0.04})
         text = urllib.request.urlopen(f"http://127.0.0.1:{server.port}/metrics", timeout=5).read().decode()
     finally:
         server.close()
@@ -298,5 +299,7 @@ def test_learner_prometheus_endpoint_serves_its_status():
     assert float(lines["laneshift_learner_env_steps_total"]) == 3400
     assert float(lines["laneshift_learner_loss"]) == 0.25
     assert float(lines['laneshift_learner_version_lag{worker="w0"}']) == 1
+    assert float(lines["laneshift_learner_sample_wait_seconds_total"]) == 1.5  # which side bounds the run
+    assert float(lines["laneshift_learner_sample_wait_ratio"]) == 0.04
     assert "laneshift_learner_episode_return_mean" not in lines  # None: not reported, not 0
     assert "laneshift_learner_updates_total counter" in text and "process_cpu_seconds_total" in lines
