@@ -434,7 +434,7 @@ class Learner:
     def _tb_scalars(self, status: dict) -> dict[str, float | None]:
         """TensorBoard's tags for one log interval (None values are left out by MetricsLog)."""
         tb: dict[str, float | None] = {f"learner/{k}": status.get(k) for k in METRIC_NAMES}
-        tb.update({f"learner/{k}": status[k] for k in ("updates", "updates_per_s", "version", "phase")})
+        tb.update({f"learner/{k}": status[k] for k in ("updates", "updates_per_s", "version", "phase", "sample_wait_share")})
         tb.update({f"train/{k}": status[k] for k in ("env_steps_per_s", "episodes", "return_mean", "length_mean",
                                                       "crash_rate", "achievement_rate", "epsilon")})
         lags = status["version_lag"]
