@@ -84,3 +84,14 @@ def test_the_waits_say_which_side_bounded_the_run():
     assert "the workers bounded the run" in _waits(load_run_config(), [dict(workers[0], rate_limited_s=0.1)],
                                                    {"sample_wait_s": 4.0, "elapsed_s": 10.0})[0]
     assert _waits(load_run_config(overrides={"train.parallel": "sync"}), workers, learner) == []  # sync waits by design
+
+
+def test_derive_bounds_p1_by_the_bare_loop_before_and_after_the_run():
+    r = {"learner": {"cases": [{"name": "mlp-b256", "bare": {"updates_per_s": 140.0}}]},
+         "bare_after_run": {"updates_per_s": 160.0},
+         "run": {"training_env_steps_per_s": 960.0, "steady_env_steps_per_s": 1080.0},
+         "peers": {"rllib": {"skipped": "no venv"}, "reverb": {"skipped": "no venv"}}}
+    t = derive(r)
+    assert t["p1_bound_env_steps_per_s"] == 150.0 * 256 / 32 == 1200.0 and t["p1_fraction_of_bound"] == 0.9
+    r["bare_after_run"] = {"updates_per_s": None}  # the second measurement failed: the first alone
+    assert derive(r)["p1_bound_env_steps_per_s"] == 140.0 * 8

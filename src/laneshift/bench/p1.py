@@ -26,16 +26,9 @@ import statistics
 from typing import Any
 
 from .run import bench_run
-from .suite import _bench
+from .suite import bare_updates_per_s
 
 BATCH = 256  # learner.batch_size's default, and the bare case's (mlp-b256)
-
-
-def bare_updates_per_s(seconds: float) -> float | None:
-    """The bare torch loop's updates/s (``bench learner --cases mlp-b256``, its own process)."""
-    r = _bench("learner", ["--cases", "mlp-b256", "--seconds", str(seconds), "--rounds", "2"], 600, said_by="bench p1")
-    case = next((c for c in r.get("cases") or [] if c.get("name") == "mlp-b256"), {})
-    return (case.get("bare") or {}).get("updates_per_s")
 
 
 def _r(x: float | None) -> float | None:

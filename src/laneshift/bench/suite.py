@@ -6,8 +6,10 @@ RLlib peer (``benchmarks/rllib_dqn.py`` in ``.venv-rllib``, built by ``make benc
 Reverb peer (``benchmarks/reverb_replay.py`` in ``.venv-reverb``, ``make bench-reverb``) when their
 venvs exist. Then it derives issue 13's figures from them: the learner against the bare
 loop (P5), env steps/s against the learner-bound (P1), peak memory (P8), start-up, and laneshift
-against RLlib and Reverb. Nothing is measured twice and nothing is estimated: a figure whose benchmark did
-not run is ``null`` with the reason.
+against RLlib and Reverb. Nothing is estimated: a figure whose benchmark did not run is ``null``
+with the reason. One thing is measured twice on purpose: the bare loop runs again right after the
+whole run (``bare_after_run``), and P1's bound is the mean of the two, because this machine's speed
+drifts between minutes (``bench p1`` does the same for each of its runs).
 May import: the contract and ``deploy``.
 
     laneshift bench all --out docs/results/bench-all.json      # about 10 minutes here
@@ -71,6 +73,13 @@ def _peer(name: str, venv: str, script: str, args: list[str], why_venv: str, tim
         return {"error": f"{type(exc).__name__}: {exc}"}
 
 
+def bare_updates_per_s(seconds: float, said_by: str = "bench p1") -> float | None:
+    """The bare torch loop's updates/s (``bench learner --cases mlp-b256``, its own process)."""
+    r = _bench("learner", ["--cases", "mlp-b256", "--seconds", str(seconds), "--rounds", "2"], 600, said_by=said_by)
+    case = next((c for c in r.get("cases") or [] if c.get("name") == "mlp-b256"), {})
+    return (case.get("bare") or {}).get("updates_per_s")
+
+
 def _rllib(steps: int, timeout_s: float) -> dict:
     return _peer("rllib", ".venv-rllib", "rllib_dqn.py", ["--env-steps", str(steps)],
                  "RLlib pins gymnasium 1.2.2", timeout_s)
@@ -101,6 +110,9 @@ def derive(r: dict) -> dict:
     cases = r["learner"].get("cases")
     learner = next((c for c in cases if c.get("name") == "mlp-b256"), {}) if isinstance(cases, list) else {}
     bare = _get(learner, "bare", "updates_per_s")
+    after = _get(r, "bare_after_run", "updates_per_s")
+    if bare and after:  # the machine drifts: the bound is the mean of the bare loop before and after the run
+        bare = (bare + after) / 2
     run, peer = r["run"], r["peers"]["rllib"]
     ratio = 32.0  # replay.samples_per_insert of the run, and the batch of 256: one update per 8 env steps
     bound = bare * 256 / ratio if bare else None
@@ -149,6 +161,8 @@ def bench_all(quick: bool) -> dict:
     result["ingest_1024"] = _bench("shards", ["--shards", "1", "--batch", "1024", "--duration", seconds,
                                               "--capacity", "500000" if quick else "2000000"], 900)
     result["run"] = _bench("run", ["--train-args", RUN_ARGS.format(steps=steps)], 900)
+    # The bare loop again right after the run, as `bench p1` does: P1's bound is the mean of the two.
+    result["bare_after_run"] = {"updates_per_s": bare_updates_per_s(float(seconds), said_by="bench all")}
     result["peers"] = {"rllib": _rllib(steps // 2, 1800),
                        "reverb": _reverb(seconds, "100000" if quick else "400000", 900)}
     result["targets"] = derive(result)
