@@ -36,6 +36,7 @@ def summarise(run: Run, why: str, wall: float, out: TextIO) -> dict:
         seen = actors.get(s["name"], {"last_seq": -1, "env_steps": 0})
         lost_batches += max(0, s["batches"] - 1 - int(seen["last_seq"]))
         lost_items += max(0, s["env_steps"] - int(seen["env_steps"]))
+    waits = wait_shares(summaries, last)
     placement = {**{k: {"node_id": v["node_id"], "node_ip": v["node_ip"]} for k, v in run.where.items()},
                  **{s["name"]: {"node_id": s.get("node"), "node_ip": s.get("node_ip")} for s in summaries}}
     nodes = sorted({p["node_ip"] for p in placement.values() if p.get("node_ip")})
@@ -50,7 +51,7 @@ def summarise(run: Run, why: str, wall: float, out: TextIO) -> dict:
         f"{lost_batches} batches ({lost_items} items) lost and counted",
         f"restarts        " + (", ".join(f"{k} {v}" for k, v in run.deaths.items()) or "none"),
         f"learner         {last.get('updates', 0):,} updates, final weights version {last.get('version', 0)}",
-        *_waits(cfg, summaries, last),
+        *waits_line(cfg, waits),
         *([f"stopped early   episode {last['stop_reason']['episode']} returned {last['stop_reason']['return']:.3f}"
            f" >= train.stop_return {cfg.train.stop_return} after {last['stop_reason']['elapsed_s']} s"]
           if last.get("stop_reason") else []),
@@ -60,7 +61,7 @@ def summarise(run: Run, why: str, wall: float, out: TextIO) -> dict:
     final = run_dir / "checkpoints" / "final.safetensors"
     result: dict = {"workers": summaries, "learner": last, "wall_s": round(wall, 1), "env_steps": steps,
                     "episodes": episodes, "eval": None, "ended_by": why, "placement": placement,
-                    "restarts": dict(run.deaths),
+                    "restarts": dict(run.deaths), "waits": waits,
                     "replay": {"inserted": replay.get("tables", {}).get("online", {}).get("inserted"),
                                "lost_batches": lost_batches, "lost_items": lost_items,
                                "rejected": replay.get("rejected")}}
@@ -75,14 +76,23 @@ def summarise(run: Run, why: str, wall: float, out: TextIO) -> dict:
     return result
 
 
-def _waits(cfg: RunConfig, summaries: list[dict], last: dict) -> list[str]:
-    """Which side bounded the run: the workers' time blocked by the replay's rate limiter (the
-    learner was behind the ratio) against the learner's time waiting for a sampled batch (the
-    workers or the replay were behind). Async mode only: sync rounds wait by design."""
-    if cfg.train.parallel != "async" or not summaries or not last.get("elapsed_s"):
-        return []
+def wait_shares(summaries: list[dict], last: dict) -> dict[str, float]:
+    """Which side bounded the run: the workers' share of their time blocked by the replay's rate
+    limiter (the learner was behind the ratio), and the learner's share waiting for a sampled
+    batch (the workers or the replay were behind). In the run's result as ``waits`` (``bench run``
+    reads it there); empty before the learner reported."""
+    if not summaries or not last.get("elapsed_s"):
+        return {}
     workers = sum(s.get("rate_limited_s", 0.0) for s in summaries) / max(sum(s["wall_s"] for s in summaries), 1e-6)
     learner = float(last.get("sample_wait_s") or 0.0) / max(float(last["elapsed_s"]), 1e-6)
+    return {"workers_rate_limited_share": round(workers, 3), "learner_sample_wait_share": round(learner, 3)}
+
+
+def waits_line(cfg: RunConfig, shares: dict[str, float]) -> list[str]:
+    """The summary's line for ``wait_shares``. Async mode only: sync rounds wait by design."""
+    if cfg.train.parallel != "async" or not shares:
+        return []
+    workers, learner = shares["workers_rate_limited_share"], shares["learner_sample_wait_share"]
     which = ("the learner bounded the run" if workers > learner + 0.05
              else "the workers bounded the run" if learner > workers + 0.05 else "the two were about even")
     return [f"waits           workers {workers:.0%} of their time on the rate limiter, learner {learner:.0%} "

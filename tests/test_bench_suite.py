@@ -69,21 +69,20 @@ def test_bench_run_refuses_a_run_dir_of_its_own():
 
 
 def test_the_waits_say_which_side_bounded_the_run():
-    from laneshift.bench.run import wait_shares
     from laneshift.config import load_run_config
-    from laneshift.deploy.summary import _waits
+    from laneshift.deploy.summary import wait_shares, waits_line
 
     workers = [{"name": "w0", "env_steps": 10, "wall_s": 10.0, "rate_limited_s": 6.0},
                {"name": "w1", "env_steps": 10, "wall_s": 10.0, "rate_limited_s": 7.0}]
     learner = {"sample_wait_s": 0.5, "elapsed_s": 10.0}
-    assert wait_shares({"workers": workers, "learner": learner}) == {"workers_rate_limited_share": 0.65,
-                                                                     "learner_sample_wait_share": 0.05}
-    line = _waits(load_run_config(), workers, learner)
+    assert wait_shares(workers, learner) == {"workers_rate_limited_share": 0.65, "learner_sample_wait_share": 0.05}
+    line = waits_line(load_run_config(), wait_shares(workers, learner))
     assert line == ["waits           workers 65% of their time on the rate limiter, learner 5% waiting for samples: "
                     "the learner bounded the run"]
-    assert "the workers bounded the run" in _waits(load_run_config(), [dict(workers[0], rate_limited_s=0.1)],
-                                                   {"sample_wait_s": 4.0, "elapsed_s": 10.0})[0]
-    assert _waits(load_run_config(overrides={"train.parallel": "sync"}), workers, learner) == []  # sync waits by design
+    assert "the workers bounded the run" in waits_line(load_run_config(), wait_shares(
+        [dict(workers[0], rate_limited_s=0.1)], {"sample_wait_s": 4.0, "elapsed_s": 10.0}))[0]
+    sync = load_run_config(overrides={"train.parallel": "sync"})
+    assert waits_line(sync, wait_shares(workers, learner)) == []  # sync waits by design
 
 
 def test_derive_bounds_p1_by_the_bare_loop_before_and_after_the_run():

@@ -206,23 +206,10 @@ def bench_run(train_args: str, timeout_s: float = 900.0) -> dict:
         "env_steps_per_s": round(summary["env_steps"] / max(summary["wall_s"], 1e-6), 1),
         "updates": learner.get("updates"), "updates_per_s": learner.get("updates_per_s"),
         **training_rate(run_dir),
-        **wait_shares(summary),
+        **summary.get("waits", {}),  # which side bounded the run (deploy.summary.wait_shares)
         "peak_tree_rss_mb": round(sampler.peak_rss_kb / 1024), "peak_tree_pss_mb": round(sampler.peak_pss_kb / 1024),
         "processes": sampler.by_label(), "run_dir": str(run_dir),
     }
-
-
-def wait_shares(summary: dict) -> dict:
-    """Which side bounded the run (the summary's ``waits`` line): the workers' share of their time
-    blocked by the rate limiter, and the learner's share waiting for sampled batches."""
-    workers, learner = summary.get("workers") or [], summary.get("learner") or {}
-    out = {}
-    if workers and all("rate_limited_s" in w for w in workers):
-        out["workers_rate_limited_share"] = round(sum(w["rate_limited_s"] for w in workers)
-                                                  / max(sum(w["wall_s"] for w in workers), 1e-6), 3)
-    if learner.get("sample_wait_s") is not None and learner.get("elapsed_s"):
-        out["learner_sample_wait_share"] = round(learner["sample_wait_s"] / learner["elapsed_s"], 3)
-    return out
 
 
 def training_rate(run_dir: Path) -> dict:
