@@ -34,7 +34,7 @@ from typing import Callable
 
 from laneshift.config import load_run_config
 
-from .processes import descendants  # noqa: F401 - re-exported (bench.run, the fault tests)
+from .processes import descendants
 
 #: A small, fast run with every mechanism on (LKA plant: seconds per thousand steps).
 FAST = {"env.scenario": "lka", "actor.workers": 2, "actor.send_every": 50, "actor.epsilon_decay_steps": 1000,

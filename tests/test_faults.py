@@ -25,7 +25,7 @@ import pytest
 from laneshift.config import load_run_config
 from laneshift.deploy.chaos import FAST, FAULTS, FaultInjector
 from laneshift.deploy.chaos import alive as _alive
-from laneshift.deploy.chaos import descendants as _descendants
+from laneshift.deploy.processes import descendants as _descendants
 from laneshift.deploy.local import train_local
 
 

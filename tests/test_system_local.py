@@ -24,7 +24,7 @@ from laneshift import transport, wire
 from laneshift.actors.worker import expand_version_runs
 from laneshift.config import load_run_config
 from laneshift.deploy.chaos import alive as _alive
-from laneshift.deploy.chaos import descendants as _descendants
+from laneshift.deploy.processes import descendants as _descendants
 from laneshift.deploy.local import train_local
 from laneshift.bench.run import process_label
 from laneshift.deploy.processes import ProcessGroup, wait_for_file

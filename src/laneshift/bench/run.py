@@ -32,7 +32,7 @@ import time
 from pathlib import Path
 from typing import Callable
 
-from laneshift.deploy.chaos import descendants
+from laneshift.deploy.processes import descendants
 
 #: ``make train``'s run without its demo phase: what a user's first run costs.
 DEFAULT_TRAIN_ARGS = "--workers 2 --scenario straight --env-steps 20000"
