@@ -26,9 +26,7 @@ import statistics
 from typing import Any
 
 from .run import bench_run
-from .suite import bare_updates_per_s
-
-BATCH = 256  # learner.batch_size's default, and the bare case's (mlp-b256)
+from .suite import BATCH, bare_updates_per_s, learner_bound
 
 
 def _r(x: float | None) -> float | None:
@@ -40,15 +38,15 @@ def bench_p1(rounds: int = 2, env_steps: int = 40_000, ratio: float = 32.0, trai
     if rounds < 1:
         raise SystemExit("bench p1: --rounds must be at least 1")
     args = f"--scenario straight {train_args} --env-steps {env_steps} --set replay.samples_per_insert={ratio:g}"
-    bares = [bare_updates_per_s(seconds)]
+    bares = [bare_updates_per_s(seconds, said_by="bench p1")]
     rows: list[dict[str, Any]] = []
     for i in range(rounds):
         run = bench_run(args)
-        bares.append(bare_updates_per_s(seconds))
+        bares.append(bare_updates_per_s(seconds, said_by="bench p1"))
         before, after = bares[i], bares[i + 1]
         row: dict[str, Any] = {"round": i + 1, "rc": run.get("rc"), "bare_before": _r(before), "bare_after": _r(after)}
         if before and after and run.get("rc") == 0:
-            bound = statistics.fmean([before, after]) * BATCH / ratio
+            bound = learner_bound(before, after, ratio)
             steady, whole = run.get("steady_env_steps_per_s"), run.get("training_env_steps_per_s")
             row.update({"bound_env_steps_per_s": round(bound, 1), "steady_env_steps_per_s": steady,
                         "steady_updates_per_s": run.get("steady_updates_per_s"),

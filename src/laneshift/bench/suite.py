@@ -73,7 +73,19 @@ def _peer(name: str, venv: str, script: str, args: list[str], why_venv: str, tim
         return {"error": f"{type(exc).__name__}: {exc}"}
 
 
-def bare_updates_per_s(seconds: float, said_by: str = "bench p1") -> float | None:
+#: learner.batch_size's default, and the bare loop's case (mlp-b256).
+BATCH = 256
+
+
+def learner_bound(before: float, after: float | None, ratio: float) -> float:
+    """P1's bound: the env steps/s a run at replay ratio ``ratio`` can make at most, from the bare
+    loop's updates/s measured before it and, if that ran, after it (their mean: the machine drifts
+    between minutes), times the batch over the ratio."""
+    bare = (before + after) / 2 if after else before
+    return bare * BATCH / ratio
+
+
+def bare_updates_per_s(seconds: float, said_by: str = "bench all") -> float | None:
     """The bare torch loop's updates/s (``bench learner --cases mlp-b256``, its own process)."""
     r = _bench("learner", ["--cases", "mlp-b256", "--seconds", str(seconds), "--rounds", "2"], 600, said_by=said_by)
     case = next((c for c in r.get("cases") or [] if c.get("name") == "mlp-b256"), {})
@@ -111,11 +123,8 @@ def derive(r: dict) -> dict:
     learner = next((c for c in cases if c.get("name") == "mlp-b256"), {}) if isinstance(cases, list) else {}
     bare = _get(learner, "bare", "updates_per_s")
     after = _get(r, "bare_after_run", "updates_per_s")
-    if bare and after:  # the machine drifts: the bound is the mean of the bare loop before and after the run
-        bare = (bare + after) / 2
     run, peer = r["run"], r["peers"]["rllib"]
-    ratio = 32.0  # replay.samples_per_insert of the run, and the batch of 256: one update per 8 env steps
-    bound = bare * 256 / ratio if bare else None
+    bound = learner_bound(bare, after, ratio=32.0) if bare else None  # the run's replay.samples_per_insert
     ours = run.get("training_env_steps_per_s")  # the whole of training, as RLlib's figure is read
     steady = run.get("steady_env_steps_per_s")  # its last two thirds: P1 (bench p1 repeats it in rounds)
     theirs = peer.get("env_steps_per_s") if isinstance(peer, dict) else None
@@ -162,7 +171,7 @@ def bench_all(quick: bool) -> dict:
                                               "--capacity", "500000" if quick else "2000000"], 900)
     result["run"] = _bench("run", ["--train-args", RUN_ARGS.format(steps=steps)], 900)
     # The bare loop again right after the run, as `bench p1` does: P1's bound is the mean of the two.
-    result["bare_after_run"] = {"updates_per_s": bare_updates_per_s(float(seconds), said_by="bench all")}
+    result["bare_after_run"] = {"updates_per_s": bare_updates_per_s(float(seconds))}
     result["peers"] = {"rllib": _rllib(steps // 2, 1800),
                        "reverb": _reverb(seconds, "100000" if quick else "400000", 900)}
     result["targets"] = derive(result)
