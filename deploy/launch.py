@@ -27,7 +27,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import signal
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -40,6 +39,7 @@ from .builder import Builder
 from .errors import LaunchError
 from .pinning import own_cpus, pin_process_tree, resolve_learner_core, restore_own_cpus
 from .ray_connection import RayConnection
+from .spec_process import SpecProcess
 from .run_dir import RunDirLock, default_demo_dir, ensure_demo_shard, prepare_run_dir  # noqa: F401 - re-exported
 from .summary import summarise
 
@@ -418,31 +418,6 @@ def _not_started(component: str, placement: Any, timeout: float) -> str:
 # ---------------------------------------------------------------------------- entry point
 
 
-class _SpecProcess:
-    """``spec_of(env)`` in a child process started now; ``result()`` waits and returns the spec as a
-    plain dict. A child, not a thread: highway-env, gymnasium and pygame (about 80 MB of RSS) then
-    never enter the launcher, which lives as long as the run (docs/performance.md, P8); the child
-    runs beside Ray's start, as the thread did."""
-
-    def __init__(self, cfg: RunConfig):
-        env = {f"env.{k}": v for k, v in cfg.to_dict()["env"].items()}
-        self._proc = subprocess.Popen([sys.executable, "-m", "laneshift.deploy.spec_process", json.dumps(env)],
-                                      stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                      text=True)
-
-    def result(self) -> dict:
-        out, err = self._proc.communicate()
-        if self._proc.returncode != 0:
-            last = [ln for ln in err.strip().splitlines() if ln.strip()] or ["no output"]
-            raise LaunchError(f"the env's spec could not be computed: {last[-1]}")
-        return json.loads(out)
-
-    def close(self) -> None:
-        if self._proc.poll() is None:
-            self._proc.kill()
-            self._proc.wait()
-
-
 def train(cfg: RunConfig, *, address: str | None = None, out: TextIO = sys.stdout, resume: bool = False,
           overwrite: bool = False) -> int:
     """A whole training run. ``address`` None: a private local Ray cluster; else that cluster's.
@@ -460,14 +435,14 @@ def train(cfg: RunConfig, *, address: str | None = None, out: TextIO = sys.stdou
     ray_conn = RayConnection(address)
     launcher_cpus = own_cpus()  # Run.start may move this process off the learner's CPU
     run: Run | None = None
-    spec_child: _SpecProcess | None = None
+    spec_child: SpecProcess | None = None
     rc = 1
     try:
         lock.acquire()
         prepare_run_dir(run_dir, resume, overwrite, out)
         # The env's spec, computed here once while Ray starts (Ray's start is mostly waiting), is
         # shipped to the replay server and the learner, which then build no simulator of their own.
-        spec_child = _SpecProcess(cfg)
+        spec_child = SpecProcess(cfg)
         ray_conn.open(cfg)  # contacted and authenticated before anything starts
         ray_s = time.monotonic() - started
         signals.install()  # replace Ray's SIGTERM handler (it would abort the cleanup after ~3 s)

@@ -326,11 +326,11 @@ def test_the_envs_spec_comes_from_a_child_process_and_its_failure_is_one_line():
     is the same as computed here; a config whose env cannot be built fails with its last line."""
     from laneshift.actors.envs import spec_of
     from laneshift.deploy.errors import LaunchError
-    from laneshift.deploy.launch import _SpecProcess
+    from laneshift.deploy.spec_process import SpecProcess
     from laneshift.envspec import spec_to_dict
 
     cfg = load_run_config(overrides={"env.scenario": "lka"})
-    assert _SpecProcess(cfg).result() == spec_to_dict(spec_of(cfg.env))
+    assert SpecProcess(cfg).result() == spec_to_dict(spec_of(cfg.env))
     bad = load_run_config(overrides={"env.scenario": "laneshift/NoSuchEnv-v0"})
     with pytest.raises(LaunchError, match=r"^the env's spec could not be computed: .*NoSuchEnv"):
-        _SpecProcess(bad).result()
+        SpecProcess(bad).result()
