@@ -219,10 +219,11 @@ def test_sigint_leaves_no_process_behind(tmp_path):
             pytest.fail("training never started:\n" + "".join(lines))
         family = _descendants(proc.pid)
         assert len(family) >= 5, family  # router, replay server, learner, Ray's processes and workers
-        # P8's cuts: no log monitor nor autoscaler monitor in a private cluster, and the launcher
-        # holds no simulator while training (the env's spec came from a child process).
+        # P8's cuts: no log monitor, autoscaler monitor nor API server (dashboard.py) in a private
+        # cluster, and the launcher holds no simulator while training (the env's spec came from a
+        # child process).
         labels = {process_label(p, proc.pid) for p in family}
-        assert "ray gcs" in labels and not labels & {"ray log monitor", "ray monitor"}, labels
+        assert "ray gcs" in labels and not labels & {"ray log monitor", "ray monitor", "ray dashboard"}, labels
         assert "pygame" not in Path(f"/proc/{proc.pid}/maps").read_text()
         proc.send_signal(signal.SIGINT)
         rest, _ = proc.communicate(timeout=90)
