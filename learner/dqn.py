@@ -19,7 +19,8 @@ The update is written to cost what a bare torch loop costs (``laneshift bench le
   floats only when somebody reads them (the learner loop: once per log interval), the per-row
   |TD error| likewise (``last_td_abs`` / ``last_td_abs_tensor``);
 - the demo losses cost nothing unless they are switched on and the batch has demo rows;
-- Adam is torch's fused implementation (``_ADAM_IMPL``, measured), the gradient clipping the
+- Adam is torch's fused implementation (``_ADAM_IMPL``, measured), built without importing
+  ``torch._dynamo`` (``learner/optim.py``: 1.1 s of start-up and 73 MB), the gradient clipping the
   multi-tensor (``foreach``) one;
 - the online network's pass over ``next_obs`` (Double DQN's chooser) is a separate no-grad pass on
   CPU and one pass over ``cat(obs, next_obs)`` on CUDA, see ``concat_online_pass``.
@@ -40,6 +41,8 @@ import torch.nn.functional as F
 from laneshift.config import LearnerConfig
 
 from laneshift.qnet import build_q_network
+
+from .optim import EagerAdam
 
 #: The metrics every update returns, in this order.
 METRIC_NAMES = ("loss", "q_mean", "grad_norm", "td_abs", "margin_loss", "bc_loss")
@@ -173,7 +176,7 @@ class DoubleDQN:
     def reset_optimizer(self) -> None:
         """Fresh Adam and target = online: the start of a new training run (rehearsal phase 2)."""
         # Adam's coupled weight decay is plain L2 regularisation (MATLAB's L2RegularizationFactor).
-        self.optimizer = torch.optim.Adam(self._params, lr=self.cfg.lr, weight_decay=self.cfg.weight_decay,
+        self.optimizer = EagerAdam(self._params, lr=self.cfg.lr, weight_decay=self.cfg.weight_decay,
                                           **self._adam_impl())
         self.target.load_state_dict(self.online.state_dict())
 
