@@ -73,6 +73,28 @@ def test_help_shows_defaults_and_renders_for_every_command(capsys):
     assert "(default: None)" not in text  # options without a default say nothing about it
 
 
+def test_a_core_command_builds_its_parser_without_the_tools():
+    """`laneshift train`'s process is the run's launcher: it never imports the tools' modules
+    (gymnasium, matplotlib, the demo and study code); a tool command gets its own, and a word
+    that names no command gets the full list."""
+    code = ("import sys; from laneshift.cli import build_parser; build_parser(['train', '--local']); "
+            "print(sorted(m for m in ('gymnasium', 'matplotlib', 'numpy', 'laneshift.demos', 'laneshift.bench', "
+            "'laneshift.studies') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]"
+
+    def commands(argv):
+        action = next(a for a in build_parser(argv)._actions if isinstance(a, argparse._SubParsersAction))
+        return set(action.choices)
+
+    everything = commands(None)
+    assert {"train", "demos", "experiment", "bench", "chaos"} <= everything
+    assert commands(["--help"]) == commands(["trian"]) == everything
+    assert commands(["train", "--local"]) == everything - {"demos", "experiment", "bench", "chaos"}
+    assert commands(["bench", "run"]) == commands(["train"]) | {"bench"}
+
+
 def test_version_flag_prints_the_installed_version():
     proc = subprocess.run([sys.executable, "-m", "laneshift.cli", "--version"], capture_output=True, text=True,
                           timeout=60)
