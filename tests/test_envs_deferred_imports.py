@@ -30,9 +30,9 @@ def test_laneshifts_envs_never_run_pandas_or_pyplot():
             env.reset(seed=0)
             for a in range(5):
                 env.step(0)
-        print(is_loaded("pandas"), is_loaded("matplotlib.pyplot"))
+        print(is_loaded("pandas"), is_loaded("matplotlib"), is_loaded("matplotlib.pyplot"))
     """)
-    assert out == "False False"
+    assert out == "False False False"
 
 
 def test_a_deferred_module_is_the_real_one_for_every_thread_that_touches_it():
@@ -63,6 +63,21 @@ def test_a_deferred_module_is_the_real_one_for_every_thread_that_touches_it():
         print(errors, sorted(set(shapes)), is_loaded("pandas"), is_loaded("matplotlib.pyplot"))
     """)
     assert out == "[] [(2, 1)] True True"
+
+
+def test_pyplot_runs_the_deferred_matplotlib_package_on_first_use():
+    """Both deferred: pyplot's code imports the package, on the same thread, under the same lock."""
+    out = _fresh("""
+        import laneshift.actors.envs
+        import highway_env
+        from laneshift.actors.envs.deferred_imports import is_loaded
+        assert not is_loaded("matplotlib") and not is_loaded("matplotlib.pyplot")
+        import matplotlib.pyplot as plt
+        fig = plt.figure()  # the first touch: pyplot runs, and the package with it
+        import matplotlib
+        print(type(fig).__name__, matplotlib.pyplot is plt, is_loaded("matplotlib"), is_loaded("matplotlib.pyplot"))
+    """)
+    assert out == "Figure True True True"
 
 
 def test_a_stock_highway_env_gets_them_loaded_first():
