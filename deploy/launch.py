@@ -30,6 +30,7 @@ import signal
 import sys
 import time
 from pathlib import Path
+from collections.abc import Callable
 from typing import Any, TextIO
 
 from laneshift.config import RunConfig, save_run_config
@@ -141,20 +142,25 @@ class Run:
         self.handles[component] = handle
         return handle
 
-    def _await_started(self, components: list[str]) -> None:
-        """Wait until each component answers ``info()``: placed, built and serving (or say why not)."""
+    def _await_started(self, components: list[str], then: Callable[[str], None] | None = None) -> None:
+        """Wait until each component answers ``info()``: placed, built and serving (or say why not).
+        ``then(component)`` runs as each one answers, in the order they answer."""
         import ray
 
         deadline = time.monotonic() + self.cfg.deploy.start_timeout_s
-        for component in components:
+        pending = {self.handles[c].info.remote(): c for c in components}
+        while pending:
+            ready, _ = ray.wait(list(pending), num_returns=1, timeout=max(0.1, deadline - time.monotonic()))
+            if not ready:
+                first = next(c for c in components if c in pending.values())
+                raise LaunchError(_not_started(first, self.builder.placement(first), self.cfg.deploy.start_timeout_s))
+            component = pending.pop(ready[0])
             try:
-                self.where[component] = ray.get(self.handles[component].info.remote(),
-                                                timeout=max(0.1, deadline - time.monotonic()))
-            except ray.exceptions.GetTimeoutError:
-                raise LaunchError(_not_started(component, self.builder.placement(component),
-                                               self.cfg.deploy.start_timeout_s)) from None
+                self.where[component] = ray.get(ready[0])
             except ray.exceptions.RayActorError as exc:
                 raise LaunchError(f"{component} failed to start: {_cause(exc)}") from None
+            if then is not None:
+                then(component)
 
     def start(self) -> None:
         import ray
@@ -187,7 +193,14 @@ class Run:
             worker_plain = cfg.replace(transport=dataclasses.replace(cfg.transport, router=cfg.deploy.worker_router)).to_dict()
         for i, name in enumerate(self.builder.workers):
             self._create(name, EnvWorkerActor, worker_plain, i)
-        self._await_started(["router", *replay_servers, "learner", *self.builder.workers])
+        # Each component runs as soon as it answers, not once the last one has: the learner's
+        # first weights, which every env worker waits for, go out as early as they can.
+        shares = dict(zip(self.builder.workers, self.builder.budgets))
+
+        def run(name: str) -> None:
+            self.refs[name] = self.handles[name].run.remote(*((shares[name], 0) if name in shares else ()))
+
+        self._await_started(["router", *replay_servers, "learner", *self.builder.workers], then=run)
         self.timeline["rest"] = time.monotonic() - began - self.timeline["router"]
         if self.local and cfg.deploy.learner_core >= 0:
             # After the start (which uses every CPU for the components' imports): Ray's own
@@ -196,10 +209,6 @@ class Run:
             if moved:
                 self._say(f"train: CPU {cfg.deploy.learner_core} is the learner's alone (deploy.learner_core; "
                           f"this launcher and {moved - 1} other processes of Ray's moved off it; -1 turns it off)")
-        for name in ("router", *replay_servers, "learner"):
-            self.refs[name] = self.handles[name].run.remote()
-        for name, share in zip(self.builder.workers, self.builder.budgets):
-            self.refs[name] = self.handles[name].run.remote(share, 0)
         self._say(f"train: run dir {cfg.train.run_dir}; {cfg.actor.workers} workers on {cfg.env.scenario} "
                   f"({cfg.env.observation}), demo mode {cfg.replay.demo_mode}, {cfg.train.parallel}, "
                   f"budget {cfg.train.env_steps:,} env steps; zenoh router {endpoint}")
