@@ -41,9 +41,10 @@ FAST = {"env.scenario": "lka", "actor.workers": 2, "actor.send_every": 50, "acto
         "learner.hidden": "64,64", "learner.batch_size": 64, "learner.publish_every": 10,
         "learner.checkpoint_every": 100, "learner.checkpoint_every_s": 1.0, "replay.samples_per_insert": 8,
         "replay.spi_tolerance": 1024, "replay.min_size": 200, "train.eval_episodes": 0,
-        # A fault strikes once metrics.jsonl shows its step count: logged every 0.1 s, so on a fast
-        # machine (CI: 650 to 4,000 steps within one 0.5 s interval) it still lands mid-run.
-        "train.log_every_s": 0.1,
+        # A fault strikes once metrics.jsonl shows its step count: the learner logs it every 0.1 s
+        # (learner.log_every_s), so on a fast machine (CI: 650 to 4,000 steps within 0.5 s; here 600
+        # to 5,650 within one 1 s interval) it still lands mid-run; the launcher polls as often.
+        "learner.log_every_s": 0.1, "train.log_every_s": 0.1,
         # No learner CPU of its own (the local default): with it this small run spends its whole
         # budget in about 1.5 s of training, before a fault's precondition (a checkpoint, a state
         # saved after training began) can hold; three fault tests then raced the run's end.

@@ -201,7 +201,7 @@ class Learner:
             if time.monotonic() >= next_log:
                 self._log()
                 self._maybe_save_state()
-                next_log = time.monotonic() + 1.0
+                next_log = time.monotonic() + self.lcfg.log_every_s
         self._finish()
 
     def _finish(self) -> None:
@@ -271,7 +271,7 @@ class Learner:
             if time.monotonic() >= next_log:
                 self._log()
                 self._maybe_save_state()
-                next_log = time.monotonic() + 1.0
+                next_log = time.monotonic() + self.lcfg.log_every_s
         if self.stop.is_set():
             return
         self.checkpoint("phase1")

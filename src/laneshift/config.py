@@ -273,6 +273,9 @@ class LearnerConfig:
     # Full training state (online + target nets, optimizer, update count, weights version) written
     # at least this often, so a restarted learner loses at most this much work. 0 = only at stop.
     checkpoint_every_s: float = 30.0
+    # Seconds between the learner's status reports: metrics.jsonl, TensorBoard's learner/* points,
+    # the launcher's progress line and /metrics (the fault suite logs every 0.1 s to strike mid-run).
+    log_every_s: float = 1.0
     device: Literal["auto", "cpu", "cuda"] = "auto"  # auto (cuda when torch sees a GPU) | cpu | cuda
     # Also keep each periodic checkpoint as checkpoints/u<updates>.safetensors (learning curves of
     # greedy scores: `laneshift experiment checkpoints`); off: only latest/final are kept.
@@ -305,6 +308,7 @@ class LearnerConfig:
         _check(self.bc_loss_weight >= 0, "learner.bc_loss_weight", "must be >= 0", self.bc_loss_weight)
         _check(self.seed >= 0, "learner.seed", "must be >= 0", self.seed)
         _check(self.checkpoint_every_s >= 0, "learner.checkpoint_every_s", "must be >= 0", self.checkpoint_every_s)
+        _check(self.log_every_s > 0, "learner.log_every_s", "must be > 0", self.log_every_s)
         _check(-1 <= self.metrics_port <= 65535, "learner.metrics_port", "must be -1 (off), 0 (any free port) or a port",
                self.metrics_port)
 
