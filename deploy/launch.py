@@ -29,8 +29,8 @@ import json
 import signal
 import sys
 import time
-from pathlib import Path
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any, TextIO
 
 from laneshift.config import RunConfig, save_run_config

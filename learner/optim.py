@@ -69,7 +69,8 @@ def _fill_disable_caches() -> bool:
 
 
 _UNDECORATED_STEP = getattr(torch.optim.Adam.step, "__wrapped__", None)
-#: Whether this torch has the shape the module's docstring describes; if not, nothing is changed.
+#: Whether this torch has the shape the module's docstring describes; if not, ``EagerAdam`` is
+#: torch's Adam as it is (a cache filled meanwhile changes nothing while nothing compiles).
 AVOIDS_DYNAMO = _UNDECORATED_STEP is not None and _fill_disable_caches()
 
 

@@ -406,7 +406,12 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     _add_inspection(sub)
     # The top level has no option that takes a value: the first other word is the command.
     command = next((a for a in argv if not a.startswith("-")), None) if argv is not None else None
-    wanted = {command} if command in TOOL_COMMANDS else set() if command in sub.choices else set(TOOL_COMMANDS)
+    if command in TOOL_COMMANDS:
+        wanted = {command}
+    elif command in sub.choices:  # a core command
+        wanted = set()
+    else:  # none, or a word that is no command: argparse lists them all
+        wanted = set(TOOL_COMMANDS)
     if "demos" in wanted:
         demos = sub.add_parser("demos", help="human/scripted demonstrations: record, generate, inspect")
         from laneshift.demos.cli import register as register_demos
