@@ -275,14 +275,17 @@ def test_items_are_whole_under_concurrent_ingest():
             msg, actor = tmsg(core.online.inserted)
             if (err := core.ingest(msg, actor)) is not None:
                 errors.append(err)
+            time.sleep(0)  # lets the reader's threads take the GIL between messages, as a socket wait would
 
     thread = threading.Thread(target=ingest, daemon=True)
     c = client(core)
     oldest = set()
     thread.start()
     try:
-        deadline = time.monotonic() + 0.8
-        while time.monotonic() < deadline:
+        # Until the pages have shown several tables, not for a fixed time: on a fast machine the
+        # ingest loop held the GIL so long that 0.8 s gave the reader two pages (a fresh clone).
+        deadline = time.monotonic() + 30
+        while len(oldest) < 8 and time.monotonic() < deadline:
             for offset in (0, 40):
                 page = c.get("/tables/online/items", params={"offset": offset, "limit": 100,
                                                               "include_obs": True}).json()
