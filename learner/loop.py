@@ -198,10 +198,7 @@ class Learner:
                 self._sync_round()
             else:
                 self._async_step()
-            if time.monotonic() >= next_log:
-                self._log()
-                self._maybe_save_state()
-                next_log = time.monotonic() + self.lcfg.log_every_s
+            next_log = self._log_when_due(next_log)
         self._finish()
 
     def _finish(self) -> None:
@@ -268,10 +265,7 @@ class Learner:
             batch = self._fetch(wire.SampleRequest(self.lcfg.batch_size, n))
             if batch is not None:
                 self._updates(batch)
-            if time.monotonic() >= next_log:
-                self._log()
-                self._maybe_save_state()
-                next_log = time.monotonic() + self.lcfg.log_every_s
+            next_log = self._log_when_due(next_log)
         if self.stop.is_set():
             return
         self.checkpoint("phase1")
@@ -289,6 +283,15 @@ class Learner:
             if self.stop.wait(0.2):
                 return False
         return True
+
+    def _log_when_due(self, next_log: float) -> float:
+        """Status, metrics and a state save once ``next_log`` has passed; returns the next one
+        (``learner.log_every_s`` on)."""
+        if time.monotonic() < next_log:
+            return next_log
+        self._log()
+        self._maybe_save_state()
+        return time.monotonic() + self.lcfg.log_every_s
 
     def _maybe_save_state(self) -> None:
         every = self.lcfg.checkpoint_every_s
