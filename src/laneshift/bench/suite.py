@@ -27,6 +27,8 @@ import sys
 import time
 from pathlib import Path
 
+from laneshift.config import ReplayConfig
+
 #: The run the end-to-end figures come from: ``make train``'s shape without its demo phase.
 RUN_ARGS = "--workers 2 --scenario straight --env-steps {steps}"
 
@@ -85,11 +87,16 @@ def learner_bound(before: float, after: float | None, ratio: float) -> float:
     return bare * BATCH / ratio
 
 
+def _mlp_case(learner: dict) -> dict:
+    """The mlp-b256 case of a ``bench learner`` result ({} if it did not run)."""
+    cases = learner.get("cases")
+    return next((c for c in cases if c.get("name") == "mlp-b256"), {}) if isinstance(cases, list) else {}
+
+
 def bare_updates_per_s(seconds: float, said_by: str = "bench all") -> float | None:
     """The bare torch loop's updates/s (``bench learner --cases mlp-b256``, its own process)."""
     r = _bench("learner", ["--cases", "mlp-b256", "--seconds", str(seconds), "--rounds", "2"], 600, said_by=said_by)
-    case = next((c for c in r.get("cases") or [] if c.get("name") == "mlp-b256"), {})
-    return (case.get("bare") or {}).get("updates_per_s")
+    return _get(_mlp_case(r), "bare", "updates_per_s")
 
 
 def _rllib(steps: int, timeout_s: float) -> dict:
@@ -119,12 +126,12 @@ def _ratio(shard_rows: list | None, theirs: float | None) -> float | None:
 
 def derive(r: dict) -> dict:
     """Issue 13's figures from the benchmarks' own outputs (null where one did not run)."""
-    cases = r["learner"].get("cases")
-    learner = next((c for c in cases if c.get("name") == "mlp-b256"), {}) if isinstance(cases, list) else {}
+    learner = _mlp_case(r["learner"])
     bare = _get(learner, "bare", "updates_per_s")
     after = _get(r, "bare_after_run", "updates_per_s")
     run, peer = r["run"], r["peers"]["rllib"]
-    bound = learner_bound(bare, after, ratio=32.0) if bare else None  # the run's replay.samples_per_insert
+    # RUN_ARGS leaves replay.samples_per_insert at its default: the run's replay ratio.
+    bound = learner_bound(bare, after, ratio=ReplayConfig().samples_per_insert) if bare else None
     ours = run.get("training_env_steps_per_s")  # the whole of training, as RLlib's figure is read
     steady = run.get("steady_env_steps_per_s")  # its last two thirds: P1 (bench p1 repeats it in rounds)
     theirs = peer.get("env_steps_per_s") if isinstance(peer, dict) else None
