@@ -40,8 +40,8 @@ from .builder import Builder
 from .errors import LaunchError
 from .pinning import own_cpus, pin_process_tree, resolve_learner_core, restore_own_cpus
 from .ray_connection import RayConnection
-from .spec_process import SpecProcess
 from .run_dir import RunDirLock, default_demo_dir, ensure_demo_shard, prepare_run_dir  # noqa: F401 - re-exported
+from .spec_process import SpecProcess
 from .summary import summarise
 
 

@@ -177,7 +177,7 @@ class DoubleDQN:
         """Fresh Adam and target = online: the start of a new training run (rehearsal phase 2)."""
         # Adam's coupled weight decay is plain L2 regularisation (MATLAB's L2RegularizationFactor).
         self.optimizer = EagerAdam(self._params, lr=self.cfg.lr, weight_decay=self.cfg.weight_decay,
-                                          **self._adam_impl())
+                                   **self._adam_impl())
         self.target.load_state_dict(self.online.state_dict())
 
     def state_dict(self) -> dict:

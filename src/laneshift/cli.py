@@ -394,9 +394,9 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     every command is listed, as in ``laneshift --help``).
 
     Why: ``laneshift train``'s process is the run's launcher, which lives as long as the run, and
-    the tools' modules import gymnasium, matplotlib and the demo and study code: 0.55 s of CPU
-    before Ray starts and 65 -> 30 MB of the parser's RSS (measured: ``build_parser()`` against
-    ``build_parser(["train"])``)."""
+    the tools' modules import gymnasium, matplotlib and the demo and study code: 0.52 -> 0.09 s of
+    CPU before Ray starts and 65 -> 18 MB of RSS (measured: a process building ``build_parser()``
+    against ``build_parser(["train"])``)."""
     parser = Parser(prog="laneshift", description=__doc__)
     parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}",
                         help="print laneshift's version and exit")
