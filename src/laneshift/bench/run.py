@@ -79,7 +79,7 @@ def process_label(pid: int, root: int, root_label: str = "launcher",
             return label
     if "laneshift.deploy.spec_process" in cmd:
         return "env spec (the launcher's child, during Ray's start)"
-    if "os.getppid()==p" in cmd:
+    if "laneshift-ray-reaper" in cmd:
         return "temp-dir watcher"  # the launcher's: removes Ray's temp dir if the launcher is killed
     return Path(cmd.split()[0]).name if cmd.strip() else "?"
 
