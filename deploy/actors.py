@@ -22,12 +22,14 @@ import threading
 import time
 import warnings
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import ray
 
 from laneshift.config import RunConfig, load_run_config
-from laneshift.envspec import EnvSpec, spec_from_dict
+
+if TYPE_CHECKING:
+    from laneshift.envspec import EnvSpec
 
 from .builder import Builder
 from .pinning import pin_process
@@ -39,7 +41,11 @@ def _config(plain: dict) -> tuple[RunConfig, EnvSpec | None]:
     plain = dict(plain)
     spec = plain.pop("env_spec", None)
     cfg = load_run_config(overrides={f"{s}.{k}": v for s, body in plain.items() for k, v in body.items()})
-    return cfg, (spec_from_dict(spec, cfg.env) if spec is not None else None)
+    if spec is None:  # the router's: its process never imports the env spec, wire or numpy (about 13 MB)
+        return cfg, None
+    from laneshift.envspec import spec_from_dict
+
+    return cfg, spec_from_dict(spec, cfg.env)
 
 
 def _log_to_run_dir(cfg: RunConfig, component: str) -> None:

@@ -17,10 +17,12 @@ from __future__ import annotations
 
 import threading
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from laneshift.config import RunConfig, worker_budgets, worker_names
-from laneshift.envspec import EnvSpec
+
+if TYPE_CHECKING:  # the router's process builds through here without the spec (wire, numpy)
+    from laneshift.envspec import EnvSpec
 
 
 def replay_server_names(shards: int) -> list[str]:

@@ -24,6 +24,7 @@ import dataclasses
 import functools
 import json
 import math
+import re
 import tomllib
 import typing
 from dataclasses import dataclass, field
@@ -38,6 +39,11 @@ SCENARIO_NAMES = ("straight", "merge", "curve", "roundabout", "lka")
 class ConfigError(ValueError):
     """A configuration value or file was refused; the message names the field."""
 
+
+#: What a name may be: a run id here, and on the wire every actor name and key segment
+#: (``laneshift.wire`` checks with this same rule; it lives here so that reading a config needs
+#: neither wire nor numpy).
+NAME = re.compile(r"^[A-Za-z0-9_\-]{1,64}$")
 
 def _check(cond: bool, where: str, msg: str, value: Any) -> None:
     if not cond:
@@ -331,9 +337,7 @@ class TransportConfig:
     def __post_init__(self) -> None:
         _check(self.router.startswith(("tcp/", "udp/", "unixsock-stream/")), "transport.router",
                "must be a zenoh endpoint like tcp/127.0.0.1:7447", self.router)
-        from .wire import _NAME  # the same rule as key expressions
-
-        _check(bool(_NAME.fullmatch(self.run_id)), "transport.run_id", "must match [A-Za-z0-9_-]{1,64}", self.run_id)
+        _check(bool(NAME.fullmatch(self.run_id)), "transport.run_id", "must match [A-Za-z0-9_-]{1,64}", self.run_id)
         _check(self.timeout_s > 0, "transport.timeout_s", "must be > 0", self.timeout_s)
         _check(self.max_message_mb >= 0, "transport.max_message_mb", "must be >= 0 (0 = sized from the run)",
                self.max_message_mb)

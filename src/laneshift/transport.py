@@ -29,7 +29,9 @@ from typing import Callable
 import zenoh
 
 from .config import TransportConfig
-from .wire import Kind, WireError, decode_error, decode_json, encode_error, peek_kind
+
+# ``laneshift.wire`` (and with it numpy, about 13 MB of RSS) is imported where a function needs it:
+# the router's process uses only this module's session helpers and so never loads numpy.
 
 
 #: zenoh's own limit on a received message unless the run's config sets one (zenoh's default: 1 GiB).
@@ -350,6 +352,8 @@ class StopSignal:
     def requested(self) -> bool:
         data = self._latest.take()
         if data is not None:
+            from .wire import WireError, decode_json
+
             try:
                 self._stopped |= decode_json(data).get("cmd") == "stop"
             except WireError:
@@ -381,6 +385,8 @@ def serve_queries(session: zenoh.Session, key: str, handler: Callable[[bytes], b
                     try:
                         reply = handler(payload)
                     except Exception as exc:  # noqa: BLE001 - one bad query must not stop the service
+                        from .wire import encode_error
+
                         reply = encode_error("internal", f"{type(exc).__name__}: {exc}")
                     query.reply(query.key_expr, reply)
                 finally:
@@ -406,6 +412,8 @@ def query(session: zenoh.Session, key: str, payload: bytes, timeout_s: float) ->
 
 def query_ok(session: zenoh.Session, key: str, payload: bytes, timeout_s: float) -> bytes | WireError | None:
     """Like ``query``, but an ERROR reply comes back decoded as a WireError."""
+    from .wire import Kind, decode_error, peek_kind
+
     data = query(session, key, payload, timeout_s)
     if data is not None and peek_kind(data) == Kind.ERROR:
         return decode_error(data)

@@ -47,6 +47,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from .config import NAME
+
 WIRE_VERSION = 2  # 2: transitions and batches carry `steps` (n-step returns)
 MAGIC = b"LSHF"
 _ENVELOPE = struct.Struct("<4sHBBI")  # magic, version, kind, reserved, header length
@@ -55,7 +57,7 @@ MAX_MESSAGE_BYTES = 256 * 1024 * 1024
 MAX_BATCH_ROWS = 65536
 # Dtypes allowed on the wire (numpy little-endian codes). Anything else is refused.
 ALLOWED_DTYPES = {"|u1", "|b1", "|i1", "<i2", "<u2", "<i4", "<u4", "<i8", "<f2", "<f4", "<f8"}
-_NAME = re.compile(r"^[A-Za-z0-9_\-]{1,64}$")
+_NAME = NAME  # the names rule (kept in laneshift.config, which reads it without numpy)
 
 
 class Kind(enum.IntEnum):
