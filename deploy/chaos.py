@@ -171,7 +171,9 @@ FAULTS: dict[str, dict] = {
     # here), so states come 4x as often and the replay ratio holds the workers to the learner.
     "learner": {"component": "learner", "needs": "learner_state",
                 "overrides": {"learner.checkpoint_every_s": 0.25, "replay.samples_per_insert": 32}},
-    "router": {"component": "router"},
+    # A local run's router lives in the launcher (deploy.router_in auto): killing it is the launcher's
+    # row. This row runs the router as its own actor, as on a cluster, and kills that.
+    "router": {"component": "router", "overrides": {"deploy.router_in": "actor"}},
     "replay": {"component": "replay-server", "overrides": {"replay.checkpoint_every_s": 0}},
     "replay-after-checkpoint": {"component": "replay-server", "needs": "replay_checkpoint",
                                 "overrides": {"replay.checkpoint_every_s": 0.5}},

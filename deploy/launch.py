@@ -1,10 +1,11 @@
 """``laneshift train``: one launcher for local and cluster mode; read it as the diagram.
 
-    router        (RouterActor, zenoh, on a node offering deploy.router_resources)
+    router        (RouterActor, zenoh, on a node offering deploy.router_resources; in local mode
+                   a session in this process instead: deploy.router_in)
       ^ replay    (ReplayServerActor: tables, demo shard, checkpoints, HTTP API on its node)
       ^ learner   (LearnerActor: Double DQN on learner.device, weights out, full-state checkpoints)
       ^ w0..wN-1  (EnvWorkerActor: envs, epsilon-greedy, transitions every K steps)
-    this process  Ray driver only: places the actors, supervises them, shows progress, summarises
+    this process  Ray driver: places the actors, supervises them, shows progress, summarises
 
 Every component is a Ray actor built by ``deploy.builder.Builder``, placed with its resources
 and restarted by Ray up to ``deploy.max_restarts`` times; this launcher notices a death (the
@@ -26,6 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import signal
 import sys
 import time
@@ -134,6 +136,7 @@ class Run:
         self.learner_final: dict | None = None
         self.timeline: dict[str, float] = {}  # seconds each start-up stage took
         self.env_spec: dict | None = None  # envspec.spec_to_dict of the run's env, shipped to components
+        self.router: Any = None  # the router, when it runs in this process (deploy.router_in)
 
     # -- start
 
@@ -162,6 +165,14 @@ class Run:
             if then is not None:
                 then(component)
 
+    def _router_in_launcher(self) -> bool:
+        """``deploy.router_in``: the router's session in this process (local mode), or an actor."""
+        where = self.cfg.deploy.router_in
+        if where == "launcher" and not self.local:
+            raise LaunchError("deploy.router_in=launcher needs a local run (--local): on a cluster the router "
+                              "must outlive this driver and be placed by Ray (deploy.router_in=actor or auto)")
+        return where == "launcher" or (where == "auto" and self.local)
+
     def start(self) -> None:
         import ray
 
@@ -171,12 +182,16 @@ class Run:
         host = cfg.deploy.advertise_host or ("127.0.0.1" if self.local else "")
         port = self.builder.router_port(self.local)
         began = time.monotonic()
-        self._create("router", RouterActor, cfg.to_dict(), port, host)
-        if host:  # its endpoint is known before it runs: the rest start with it (clients retry until it listens)
+        in_launcher = self._router_in_launcher()
+        if in_launcher:  # opened below, once the actors are on their way (opening takes ~0.4 s)
             endpoint = f"tcp/{host}:{port}"
-        else:  # it listens on the address of the node it lands on: wait to learn which
-            self._await_started(["router"])
-            endpoint = self.where["router"]["endpoint"]
+        else:
+            self._create("router", RouterActor, cfg.to_dict(), port, host)
+            if host:  # its endpoint is known before it runs: the rest start with it (clients retry until it listens)
+                endpoint = f"tcp/{host}:{port}"
+            else:  # it listens on the address of the node it lands on: wait to learn which
+                self._await_started(["router"])
+                endpoint = self.where["router"]["endpoint"]
         self.timeline["router"] = time.monotonic() - began
         # From here on every component is a client of the router where it landed.
         cfg = self.cfg = cfg.replace(transport=dataclasses.replace(cfg.transport, router=endpoint))
@@ -193,6 +208,13 @@ class Run:
             worker_plain = cfg.replace(transport=dataclasses.replace(cfg.transport, router=cfg.deploy.worker_router)).to_dict()
         for i, name in enumerate(self.builder.workers):
             self._create(name, EnvWorkerActor, worker_plain, i)
+        if in_launcher:
+            opened = time.monotonic()
+            self.router = self.builder.router(endpoint).start(announce=False)
+            self.where["router"] = {"node_id": ray.get_runtime_context().get_node_id(),
+                                    "node_ip": ray.util.get_node_ip_address(), "pid": os.getpid(),
+                                    "restarted": False, "endpoint": endpoint, "in": "launcher"}
+            self.timeline["router"] += time.monotonic() - opened
         # Each component runs as soon as it answers, not once the last one has: the learner's
         # first weights, which every env worker waits for, go out as early as they can.
         shares = dict(zip(self.builder.workers, self.builder.budgets))
@@ -200,7 +222,8 @@ class Run:
         def run(name: str) -> None:
             self.refs[name] = self.handles[name].run.remote(*((shares[name], 0) if name in shares else ()))
 
-        self._await_started(["router", *replay_servers, "learner", *self.builder.workers], then=run)
+        self._await_started([*([] if in_launcher else ["router"]), *replay_servers, "learner", *self.builder.workers],
+                            then=run)
         self.timeline["rest"] = time.monotonic() - began - self.timeline["router"]
         if self.local and cfg.deploy.learner_core >= 0:
             # After the start (which uses every CPU for the components' imports): Ray's own
@@ -388,6 +411,13 @@ class Run:
                 ray.get(self.handles["router"].stop.remote(), timeout=10)
             except ray.exceptions.RayError:
                 pass
+        self.close_router()
+
+    def close_router(self) -> None:
+        """The router session in this process, if it holds one (``deploy.router_in``), last of all."""
+        if self.router is not None:
+            self.router.close()
+            self.router = None
 
     def kill_all(self) -> None:
         import ray
@@ -497,6 +527,7 @@ def train(cfg: RunConfig, *, address: str | None = None, out: TextIO = sys.stdou
             spec_child.close()
         if run is not None:
             run.kill_all()
+            run.close_router()
         ray_conn.close()
         lock.release()
         signals.restore()

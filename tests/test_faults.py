@@ -81,7 +81,9 @@ def test_learner_killed_comes_back_from_its_state_with_a_higher_version(tmp_path
 
 
 def test_router_killed_comes_back_on_the_same_endpoint(tmp_path):
-    run_dir, summary, replay, text = run_with_fault(tmp_path, "router", at_steps=1500)
+    # As its own actor (as on a cluster): a local run's router otherwise lives in the launcher.
+    run_dir, summary, replay, text = run_with_fault(tmp_path, "router", at_steps=1500,
+                                                    **{"deploy.router_in": "actor"})
     log = (run_dir / "logs" / "router.log").read_text()
     endpoints = {line.split("listening on ")[1].strip() for line in log.splitlines() if "listening on" in line}
     assert len(endpoints) == 1, log  # same endpoint after the restart: every client reconnected
@@ -239,3 +241,19 @@ def _cmdline(pid: int) -> str:
         return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
     except OSError:
         return ""
+
+
+def test_the_router_runs_in_a_local_launcher_and_as_an_actor_on_a_cluster():
+    """``deploy.router_in``: auto puts a local run's router in the launcher (whose death ends a
+    local run anyway) and a cluster run's in its own actor; the launcher is refused on a cluster."""
+    from laneshift.deploy.errors import LaunchError
+    from laneshift.deploy.launch import Run, StopSignals
+
+    def in_launcher(local: bool, **overrides) -> bool:
+        return Run(load_run_config(overrides=overrides), local=local, out=io.StringIO(),
+                   signals=StopSignals())._router_in_launcher()
+
+    assert in_launcher(True) and not in_launcher(False)
+    assert not in_launcher(True, **{"deploy.router_in": "actor"})
+    with pytest.raises(LaunchError, match="needs a local run"):
+        in_launcher(False, **{"deploy.router_in": "launcher"})

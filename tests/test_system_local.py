@@ -197,6 +197,19 @@ def test_malformed_messages_are_counted_and_dropped(replay_server_process):
     group.check_alive()  # the server kept running
 
 
+def test_a_router_process_never_imports_numpy():
+    """P8: a router actor's process builds its router as ``RouterActor`` does (its config without an
+    env spec, the builder, a listening session) and never loads the wire module or numpy (13 MB)."""
+    port = transport.free_tcp_port()
+    code = ("import sys; from laneshift.deploy.actors import _config; from laneshift.deploy.builder import Builder; "
+            "from laneshift.config import RunConfig; cfg, spec = _config(RunConfig().to_dict()); "
+            f"r = Builder(cfg, spec).router('tcp/127.0.0.1:{port}').start(announce=False); r.close(); "
+            "print(sorted(m for m in ('numpy', 'laneshift.wire', 'laneshift.envspec') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip().splitlines()[-1] == "[]"
+
+
 def test_sigint_leaves_no_process_behind(tmp_path):
     cmd = [sys.executable, "-m", "laneshift", "train", "--local", "--workers", "2", "--scenario", "lka",
            "--env-steps", "10000000", "--run-dir", str(tmp_path / "run"), "--set", "train.log_every_s=0.5",
@@ -224,6 +237,9 @@ def test_sigint_leaves_no_process_behind(tmp_path):
         # child process).
         labels = {process_label(p, proc.pid) for p in family}
         assert "ray gcs" in labels and not labels & {"ray log monitor", "ray monitor", "ray dashboard"}, labels
+        # The router runs in the launcher (deploy.router_in auto, local mode), and the temp-dir
+        # watcher waits as a shell (Python starts only for its clean-up).
+        assert "router" not in labels and "temp-dir watcher" in labels, labels
         # Nor Ray's dashboard dependencies: the agent runs as a minimal install's (no check imports them).
         maps = Path(f"/proc/{proc.pid}/maps").read_text()
         assert "pygame" not in maps and "aiohttp" not in maps

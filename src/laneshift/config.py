@@ -387,13 +387,19 @@ class DeployConfig:
     """Where each component runs: Ray actor resources, the router's address, supervision.
 
     Every component (zenoh router, replay server, learner, env workers) is a Ray actor, each its
-    own process; these fields are its Ray options. Custom resources place a component on a
+    own process (a local run's router excepted: ``router_in``); these fields are its Ray options. Custom resources place a component on a
     node that offers them (``ray start --resources '{"laneshift_replay": 1}'``); ``GPU`` in
     ``learner_resources`` becomes the learner's ``num_gpus``.
     """
 
     # The router listens on this port on its node. 0: a free port (local mode) or 7447 (cluster).
     router_port: int = 0
+    # Where the router runs. "actor": its own Ray actor, placed by router_resources and restarted
+    # by Ray. "launcher": a zenoh session in the launcher's own process, local mode only. A local
+    # run's Ray processes all die with its launcher, so there an actor adds no supervision worth
+    # its process: a Ray worker holding one zenoh session cost about 106 MB of the run's 1.24 GB
+    # (issue 13, P8; docs/performance.md). "auto": the launcher in local mode, an actor on a cluster.
+    router_in: Literal["auto", "actor", "launcher"] = "auto"
     # The address the router listens on and every client connects to. "" = the address Ray
     # registered for the router's node (``ray start --node-ip-address``), 127.0.0.1 in local mode.
     advertise_host: str = ""
@@ -421,6 +427,7 @@ class DeployConfig:
     learner_core: int = -2
 
     def __post_init__(self) -> None:
+        _check_choices(self, "deploy")
         _check(0 <= self.router_port <= 65535, "deploy.router_port", "must be 0 (default) or a port",
                self.router_port)
         _check(self.worker_router == "" or self.worker_router.startswith(("tcp/", "udp/")), "deploy.worker_router",
