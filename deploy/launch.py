@@ -7,8 +7,9 @@
       ^ w0..wN-1  (EnvWorkerActor: envs, epsilon-greedy, transitions every K steps)
     this process  Ray driver: places the actors, supervises them, shows progress, summarises
 
-Every component is a Ray actor built by ``deploy.builder.Builder``, placed with its resources
-and restarted by Ray up to ``deploy.max_restarts`` times; this launcher notices a death (the
+Every component is a Ray actor built by ``deploy.builder.Builder`` (a local run's router excepted:
+this process hosts it, since a local run's Ray processes die with it anyway), placed with its
+resources and restarted by Ray up to ``deploy.max_restarts`` times; this launcher notices a death (the
 actor's ``run()`` call fails), says so, and calls ``run()`` again on the restarted actor, which
 resumes from its checkpoint (replay table, learner state) or from what the replay server stored
 of it (an env worker's steps and sequence numbers). Local mode is a private Ray cluster (state
