@@ -248,7 +248,9 @@ class Run:
             self._say(f"train: learner metrics (Prometheus) {learner['metrics_url']}")
         replay_where = (f"replay server on {self.where['replay-server']['node_ip']}" if len(replay_servers) == 1
                         else ", ".join(f"{n} on {self.where[n]['node_ip']}" for n in replay_servers))
-        self._say(f"train: router on {self.where['router']['node_ip']}, {replay_where}, learner on {learner['node_ip']}")
+        router = self.where["router"]
+        router_where = f"router {'in this launcher ' if router.get('in') == 'launcher' else ''}on {router['node_ip']}"
+        self._say(f"train: {router_where}, {replay_where}, learner on {learner['node_ip']}")
 
     # -- supervise
 
