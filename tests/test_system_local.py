@@ -231,7 +231,7 @@ def test_sigint_leaves_no_process_behind(tmp_path):
         else:
             pytest.fail("training never started:\n" + "".join(lines))
         family = _descendants(proc.pid)
-        assert len(family) >= 5, family  # router, replay server, learner, Ray's processes and workers
+        assert len(family) >= 5, family  # replay server, learner, Ray's processes and workers
         # P8's cuts: no log monitor, autoscaler monitor nor API server (dashboard.py) in a private
         # cluster, and the launcher holds no simulator while training (the env's spec came from a
         # child process).

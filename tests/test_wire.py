@@ -111,7 +111,7 @@ def check_batch_fits(batch: TransitionBatch, schema: TransitionSchema) -> None:
     """An independent statement of what a decoded batch must satisfy."""
     rows = len(batch)
     assert 1 <= rows <= schema.max_rows
-    assert wire._NAME.fullmatch(batch.actor)
+    assert wire.NAME.fullmatch(batch.actor)
     for v in (batch.seq, batch.weights_version, batch.phase, batch.env_steps):
         assert isinstance(v, int) and not isinstance(v, bool) and v >= 0
     assert isinstance(batch.extra, dict)

@@ -45,6 +45,7 @@ class ConfigError(ValueError):
 #: neither wire nor numpy).
 NAME = re.compile(r"^[A-Za-z0-9_\-]{1,64}$")
 
+
 def _check(cond: bool, where: str, msg: str, value: Any) -> None:
     if not cond:
         raise ConfigError(f"{where}: {msg}, got {value!r}")
@@ -387,9 +388,9 @@ class DeployConfig:
     """Where each component runs: Ray actor resources, the router's address, supervision.
 
     Every component (zenoh router, replay server, learner, env workers) is a Ray actor, each its
-    own process (a local run's router excepted: ``router_in``); these fields are its Ray options. Custom resources place a component on a
-    node that offers them (``ray start --resources '{"laneshift_replay": 1}'``); ``GPU`` in
-    ``learner_resources`` becomes the learner's ``num_gpus``.
+    own process (a local run's router excepted: ``router_in``); these fields are its Ray options.
+    Custom resources place a component on a node that offers them (``ray start --resources
+    '{"laneshift_replay": 1}'``); ``GPU`` in ``learner_resources`` becomes the learner's ``num_gpus``.
     """
 
     # The router listens on this port on its node. 0: a free port (local mode) or 7447 (cluster).

@@ -47,7 +47,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from .config import NAME
+from .config import NAME  # the names rule: in config, which reads it without numpy
 
 WIRE_VERSION = 2  # 2: transitions and batches carry `steps` (n-step returns)
 MAGIC = b"LSHF"
@@ -57,7 +57,6 @@ MAX_MESSAGE_BYTES = 256 * 1024 * 1024
 MAX_BATCH_ROWS = 65536
 # Dtypes allowed on the wire (numpy little-endian codes). Anything else is refused.
 ALLOWED_DTYPES = {"|u1", "|b1", "|i1", "<i2", "<u2", "<i4", "<u4", "<i8", "<f2", "<f4", "<f8"}
-_NAME = NAME  # the names rule (kept in laneshift.config, which reads it without numpy)
 
 
 class Kind(enum.IntEnum):
@@ -91,7 +90,7 @@ _REPLAY_NS = re.compile(r"^[A-Za-z0-9_\-]{1,64}/shard-[0-9]{1,3}$")
 def _check_name(kind: str, value: str) -> str:
     if kind == "run" and isinstance(value, str) and _REPLAY_NS.fullmatch(value):
         return value
-    if not isinstance(value, str) or not _NAME.fullmatch(value):
+    if not isinstance(value, str) or not NAME.fullmatch(value):
         raise ValueError(f"{kind} {value!r} must match [A-Za-z0-9_-]{{1,64}}")
     return value
 
@@ -297,7 +296,7 @@ def _read_array(buf: memoryview, spec: Any, offset: int) -> tuple[str, np.ndarra
     if not isinstance(spec, dict) or set(spec) != {"name", "dtype", "shape"}:
         raise WireError("bad_header", f"array entry {spec!r} must have exactly name, dtype, shape")
     name, code, shape = spec["name"], spec["dtype"], spec["shape"]
-    if not isinstance(name, str) or not _NAME.fullmatch(name):
+    if not isinstance(name, str) or not NAME.fullmatch(name):
         raise WireError("bad_header", f"bad array name {name!r}")
     if not isinstance(code, str) or code not in ALLOWED_DTYPES:
         raise WireError("bad_dtype", f"array {name!r}: dtype {code!r} not allowed")
@@ -408,7 +407,7 @@ def _checked_transitions(data: bytes | bytearray | memoryview, schema: Transitio
     msg = decode(data, expect=Kind.TRANSITIONS)
     h = msg.header
     actor = _require(h, "actor", str)
-    if not _NAME.fullmatch(actor):
+    if not NAME.fullmatch(actor):
         raise WireError("bad_header", f"bad actor name {actor!r}")
     ints = {k: _require(h, k, int) for k in ("seq", "weights_version", "phase", "env_steps")}
     if any(v < 0 for v in ints.values()):
@@ -620,7 +619,7 @@ def _fast_transitions(data: bytes | bytearray | memoryview, schema: TransitionSc
         return None
     actor, extra = h.get("actor"), h.get("extra", {})
     seq, version, phase, steps = h.get("seq"), h.get("weights_version"), h.get("phase"), h.get("env_steps")
-    if (type(actor) is not str or not _NAME.fullmatch(actor) or type(extra) is not dict
+    if (type(actor) is not str or not NAME.fullmatch(actor) or type(extra) is not dict
             or type(seq) is not int or type(version) is not int or type(phase) is not int or type(steps) is not int
             or not (0 <= seq < MAX_COUNTER and 0 <= version < MAX_COUNTER and 0 <= phase < MAX_COUNTER
                     and 0 <= steps < MAX_COUNTER)):
@@ -820,7 +819,7 @@ def decode_sample_request(data: bytes | bytearray | memoryview) -> SampleRequest
     msg = decode(data, expect=Kind.SAMPLE_REQUEST)
     h = msg.header
     actors = h.get("actors", [])
-    if not isinstance(actors, list) or not all(isinstance(x, str) and _NAME.fullmatch(x) for x in actors):
+    if not isinstance(actors, list) or not all(isinstance(x, str) and NAME.fullmatch(x) for x in actors):
         raise WireError("bad_request", f"bad actors list {actors!r}")
     return SampleRequest(batch_size=_require(h, "batch_size", int, "bad_request"),
                          num_batches=_require(h, "num_batches", int, "bad_request"),
