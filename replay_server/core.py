@@ -290,9 +290,10 @@ class ReplayCore:
                 batch.info.update(mass=drawn.mass, weight_scale=drawn.scale)
             if not demo_only:
                 self.samples += rows
+            demo_rows = len(drawn.demo_rows)
             self.sampled_rows += rows
-            self.sampled_demo_rows += int(is_demo.sum())
-            self._recent.append((rows, int(is_demo.sum())))
+            self.sampled_demo_rows += demo_rows
+            self._recent.append((rows, demo_rows))
             self.requests["served"] += 1
             self._rates.add("samples", rows)
         return batch
@@ -300,26 +301,37 @@ class ReplayCore:
     def _gather(self, is_demo: np.ndarray, demo_rows: np.ndarray, online_rows: np.ndarray, nb: int,
                 weight: np.ndarray) -> SampledBatch:
         n = is_demo.shape[0]
+        index = np.empty(n, np.int64)
+        info = {"phase": self.phase, "prioritized": self.prioritized}
+        records = self.online.records
+        if demo_rows.shape[0] == 0 and records is not None:
+            # All rows online, in a record table: one gather of whole records (storage.record_dtype).
+            # The batch's columns are views of it; encode_batch copies each once, into the reply.
+            picked = np.take(records, online_rows, mode="clip")
+            np.take(self.online.key, online_rows, out=index, mode="clip")
+            return SampledBatch(obs=picked["obs"], action=picked["action"], reward=picked["reward"],
+                                next_obs=picked["next_obs"], terminated=picked["terminated"], steps=picked["steps"],
+                                is_demo=is_demo.view(np.uint8), index=index, weight=weight, num_batches=nb, info=info)
         out = {
             "obs": np.empty((n, *self.schema.obs_shape), self.schema.obs_dtype),
             "next_obs": np.empty((n, *self.schema.obs_shape), self.schema.obs_dtype),
             "action": np.empty(n, np.int64), "reward": np.empty(n, np.float32), "terminated": np.empty(n, np.uint8),
             "steps": np.empty(n, np.uint8),
         }
-        index = np.empty(n, np.int64)
         if demo_rows.shape[0] == 0:  # all rows online (no demos sampled): gather straight into the outputs
             for name, arr in out.items():
                 _take(getattr(self.online, name), online_rows, arr)
             _take(self.online.key, online_rows, index)
         else:
             d, o = is_demo, ~is_demo
+            picked = np.take(records, online_rows, mode="clip") if records is not None else None
             for name in out:
                 out[name][d] = getattr(self.demo, name)[demo_rows]
-                out[name][o] = getattr(self.online, name)[online_rows]
+                out[name][o] = picked[name] if picked is not None else getattr(self.online, name)[online_rows]
             index[d] = demo_rows
             index[o] = self.online.key[online_rows]
-        return SampledBatch(is_demo=is_demo.astype(np.uint8), index=index, weight=weight, num_batches=nb,
-                            info={"phase": self.phase, "prioritized": self.prioritized}, **out)
+        return SampledBatch(is_demo=is_demo.astype(np.uint8), index=index, weight=weight, num_batches=nb, info=info,
+                            **out)
 
     def update_priorities(self, update: PriorityUpdate) -> int:
         """New priorities for sampled items (e.g. |TD error|); items evicted since are skipped.
@@ -352,7 +364,7 @@ class ReplayCore:
             return self.reject("priorities:failed")
         return None
 
-    def handle_sample_query(self, payload: bytes | bytearray | memoryview) -> bytes:
+    def handle_sample_query(self, payload: bytes | bytearray | memoryview) -> bytes | bytearray:
         """Bytes in, bytes out: what the zenoh queryable replies."""
         # A learner sends the same request bytes every time: decode them once (SampleRequest is frozen).
         last = self._last_request

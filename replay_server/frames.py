@@ -99,6 +99,7 @@ class FrameRingTable(RingTable):
         self.obs_key = np.zeros((self.capacity, stack), np.int64)
         self.next_key = np.zeros((self.capacity, stack), np.int64)
         self.obs, self.next_obs = StackView(self.store, self.obs_key), StackView(self.store, self.next_key)
+        self.records = None  # the stacks are not in the records: a sample gathers column by column
         self._tail = 0  # key of the oldest live item
         # Every stored item's oldest frame key is >= this (the previous item's): the items' oldest
         # frames rise with their keys, so when the frame ring wraps the items to drop are a prefix.

@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from laneshift import wire
 from laneshift.config import ReplayConfig
 from laneshift.replay_server.core import ReplayCore
-from laneshift.replay_server.storage import RingTable
+from laneshift.replay_server.storage import DemoTable, RingTable
 from laneshift.wire import SampleRequest, TransitionBatch, TransitionSchema
 
 SCHEMA = TransitionSchema(obs_shape=(3,), obs_dtype="float32", n_actions=5)
@@ -85,6 +85,28 @@ def test_all_online_gather_returns_the_stored_rows(total):
         for name in ("obs", "next_obs", "action", "reward", "terminated", "steps"):
             assert np.array_equal(getattr(out, name), getattr(core.online, name)[rows]), name
         assert (out.weight == 1).all()
+
+
+def test_mixed_gather_returns_the_stored_demo_and_online_rows():
+    """Retention: demo rows come from the demo table, online rows from the ring's records."""
+    rows = 40
+    obs = np.zeros((rows, 3), np.float32)
+    obs[:, 0] = -1 - np.arange(rows)  # demo obs[:, 0] < 0, online >= 0
+    demo = DemoTable(obs, np.arange(rows) % 5, np.linspace(-1, 0, rows).astype(np.float32), obs + 0.25,
+                     (np.arange(rows) % 2).astype(np.uint8), "sha", {}, (1 + np.arange(rows) % 2).astype(np.uint8))
+    core = ReplayCore(ReplayConfig(capacity=64, min_size=1, samples_per_insert=0.0, demo_mode="retention",
+                                   demo_ratio=0.25), SCHEMA, demo)
+    fill(core, 150)
+    out = core.sample(SampleRequest(64, 2))
+    assert isinstance(out, wire.SampledBatch)
+    d = out.is_demo.astype(bool)
+    assert d.any() and (~d).any()
+    online_rows = out.index[~d] % core.online.capacity
+    assert np.array_equal(core.online.key[online_rows], out.index[~d])
+    for name in ("obs", "next_obs", "action", "reward", "terminated", "steps"):
+        assert np.array_equal(getattr(out, name)[d], getattr(core.demo, name)[out.index[d]]), name
+        assert np.array_equal(getattr(out, name)[~d], getattr(core.online, name)[online_rows]), name
+    assert (out.obs[d, 0] < 0).all() and np.array_equal(out.obs[~d, 0], out.index[~d].astype(np.float32))
 
 
 def test_sample_query_cache_serves_repeats_and_still_refuses_bad_requests():

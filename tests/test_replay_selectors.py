@@ -18,6 +18,24 @@ def test_uniform_draws_every_live_row_and_only_those():
     assert d.is_demo.mean() == pytest.approx(3 / 7, abs=0.02) and (d.weight == 1).all()
 
 
+@pytest.mark.parametrize("tail,size,live", [
+    (0, 5, {0, 1, 2, 3, 4}),  # not yet wrapped
+    (13, 8, set(range(8))),  # full: every row, whatever the tail
+    (6, 4, {6, 7, 0, 1}),  # a frame table's tail ahead of a full ring's, wrapping
+    (16, 3, {0, 1, 2}),  # the same at a multiple of the capacity
+])
+def test_uniform_online_only_draws_the_live_rows(tail, size, live):
+    rng = np.random.default_rng(1)
+    selector = UniformSelector()
+    d = selector.draw(rng, 5_000, n_demo=0, online_tail=tail, online_size=size, online_capacity=8)
+    assert set(d.online_rows.tolist()) == live and len(d.demo_rows) == 0
+    again = selector.draw(rng, 5_000, n_demo=0, online_tail=tail, online_size=size, online_capacity=8)
+    # The all-False mask and the unit weights are shared between draws, so nobody may write them.
+    assert again.is_demo is d.is_demo and again.weight is d.weight
+    assert not d.is_demo.flags.writeable and not d.weight.flags.writeable
+    assert not d.is_demo.any() and (d.weight == 1).all()
+
+
 def test_prioritized_draws_by_mass_and_weights_the_rare_rows_up():
     s = PrioritizedSelector(demo_size=2, online_capacity=4, alpha=1.0, beta=1.0, demo_bonus=1.0)
     s.inserted(np.array([0, 1]))  # new items at the highest priority seen (1.0)

@@ -282,6 +282,24 @@ def test_batch_fast_paths_match_the_generic_ones(schema, rows, nb):
         assert x.flags.writeable and x.flags.aligned
 
 
+def test_a_batch_of_record_fields_encodes_as_its_columns():
+    """The replay server gathers whole records (``storage.record_dtype``) and hands encode_batch
+    their fields: strided views, written into the message as the same bytes as their copies."""
+    schema = SCHEMAS[1]
+    batch = sampled(schema, 32, 2)
+    rec = np.zeros(32, [("obs", "<f4", schema.obs_shape), ("next_obs", "<f4", schema.obs_shape), ("action", "<i8"),
+                        ("reward", "<f4"), ("terminated", "|u1"), ("steps", "|u1")])
+    for name in rec.dtype.names:
+        rec[name] = getattr(batch, name)
+    views = SampledBatch(**{**batch.__dict__, **{name: rec[name] for name in rec.dtype.names}})
+    assert not views.obs.flags.c_contiguous
+    data = encode_batch(views)
+    assert data == generic_encode(batch) == encode_batch(batch)
+    back = wire.decode_batch(data, schema)
+    for k in wire._BATCH_FIELDS:
+        assert np.array_equal(getattr(back, k), getattr(batch, k)), k
+
+
 def test_encode_batch_falls_back_for_other_forms():
     schema = SCHEMAS[1]
     batch = sampled(schema, 8)
