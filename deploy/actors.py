@@ -206,7 +206,8 @@ class LearnerActor(_Service):
         torch.set_num_threads(cfg.learner.torch_threads)
         set_learner_switch_interval()
         builder = Builder(cfg, self.spec)
-        self.session = transport.open_session(cfg.transport, max_message_bytes=cfg.max_message_bytes, who="learner")
+        self.session = transport.open_session(cfg.transport, max_message_bytes=cfg.max_message_bytes, who="learner",
+                                              batching=False)  # sample requests: see session_config
         self.learner = builder.learner(builder.learner_links(self.session, self.stop_event), self.stop_event)
 
     def info(self) -> dict[str, Any]:

@@ -550,7 +550,7 @@ def run_learner(cfg: RunConfig, spec: EnvSpec, evaluate: EvaluatePolicy | None =
         # Waits for the router as long as it takes (it may start later; transport.connect_timeout_s
         # bounds it where the config has one), saying so in a line every 30 s.
         session = transport.open_session(cfg.transport, max_message_bytes=cfg.max_message_bytes, who="learner",
-                                         stop=stop)
+                                         stop=stop, batching=False)  # sample requests: see session_config
     except InterruptedError as exc:  # SIGINT/SIGTERM before any router answered
         print(f"learner: {exc}", flush=True)
         return 0

@@ -83,7 +83,7 @@ class ReplayService:
         return {"wire_version": wire.WIRE_VERSION, "obs_shape": list(schema.obs_shape), "obs_dtype": schema.obs_dtype,
                 "n_actions": schema.n_actions, "run_id": run_id, "mode": core.mode, "http_url": core.http_url}
 
-    def _sample(self, payload: bytes) -> bytes:
+    def _sample(self, payload: bytes) -> bytes | bytearray:
         start = time.perf_counter()
         reply = self.core.handle_sample_query(payload)
         result = "batch" if wire.peek_kind(reply) == wire.Kind.BATCH else "error"
@@ -250,8 +250,9 @@ class ReplayServer:
             print(f"{self.who}: restored {self.restored} items from {self.checkpoint_dir}", flush=True)
         transport.use_service_runtime()
         mode = "router" if self.embedded_router else "client"
+        # Sample replies leave on this session: unbatched (transport.session_config says why).
         session = transport.open_session(cfg.transport, mode, cfg.max_message_bytes, who=self.who,
-                                         stop=self._stop)
+                                         stop=self._stop, batching=False)
         try:
             ingest_session = transport.open_session(cfg.transport, "client", cfg.max_message_bytes,
                                                     who=self.who, stop=self._stop)

@@ -25,6 +25,10 @@ def test_session_config_is_client_behind_router_without_shared_memory() -> None:
     assert conf["transport"]["shared_memory"]["enabled"] is False
     queue = conf["transport"]["link"]["tx"]["queue"]
     assert queue["size"]["data"] == 16 and queue["congestion_control"]["block"]["wait_before_close"] == 60_000_000
+    assert queue["batching"]["enabled"] is True  # zenoh's default, kept for streams
+    # The sample path's two ends send unbatched: a reply's last batch is not held back.
+    unbatched = json.loads(str(transport.session_config("tcp/127.0.0.1:7447", "client", batching=False)))
+    assert unbatched["transport"]["link"]["tx"]["queue"]["batching"]["enabled"] is False
     router = json.loads(str(transport.session_config("tcp/127.0.0.1:7447", "router")))
     assert router["listen"]["endpoints"] == ["tcp/127.0.0.1:7447"]
     assert router["transport"]["shared_memory"]["enabled"] is False

@@ -39,7 +39,7 @@ DEFAULT_MAX_MESSAGE_BYTES = 64 * 2**20
 
 
 def session_config(endpoint: str, mode: str, max_message_bytes: int = DEFAULT_MAX_MESSAGE_BYTES,
-                   connect_timeout_s: float | None = None) -> zenoh.Config:
+                   connect_timeout_s: float | None = None, batching: bool = True) -> zenoh.Config:
     """A zenoh config: ``router`` listens on ``endpoint``, ``client`` connects to it.
 
     ``max_message_bytes``: a larger message is dropped by the receiving link before it is
@@ -48,6 +48,13 @@ def session_config(endpoint: str, mode: str, max_message_bytes: int = DEFAULT_MA
 
     ``connect_timeout_s`` (clients only): give up opening when no router answered in that long
     (``zenoh.open`` raises) instead of retrying forever; for one-shot commands.
+
+    ``batching=False`` for the two ends of the sample path (the replay server's query session,
+    the learner's session): with zenoh's transmit batching on (its default, time limit 1 ms),
+    about one SampleRequest(256) in ten took about 1 ms longer end to end. ``laneshift bench shards
+    --shards 1``, alternating, 2026-11-24: p99 idle 2.6-3.3 ms with batching on everywhere,
+    1.6 ms with it off in the server and its clients, 2.1-3.2 ms with it off in the router only.
+    Streams (actors' transitions) keep it.
     """
     if mode not in ("router", "client"):
         raise ValueError(f"mode must be router or client, got {mode!r}")
@@ -73,6 +80,8 @@ def session_config(endpoint: str, mode: str, max_message_bytes: int = DEFAULT_MA
     # on the dead link then held the session for wait_before_close (60 s) and its queue was lost.
     # With 30 s, the same cut resumed about 1 s after the link came back (tests/test_network_faults.py).
     conf.insert_json5("transport/link/tx/lease", "30000")
+    if not batching:
+        conf.insert_json5("transport/link/tx/queue/batching/enabled", "false")
     if mode == "router":
         conf.insert_json5("listen/endpoints", json.dumps([endpoint]))
     else:
@@ -132,7 +141,7 @@ def free_tcp_port() -> int:
 
 def open_session(cfg: TransportConfig, mode: str = "client", max_message_bytes: int | None = None,
                  connect_timeout_s: float | None = None, who: str | None = None,
-                 stop: threading.Event | None = None) -> zenoh.Session:
+                 stop: threading.Event | None = None, batching: bool = True) -> zenoh.Session:
     """Open a session; use as ``with open_session(cfg) as s:``. ``max_message_bytes``: the run's
     (``RunConfig.max_message_bytes``); else ``transport.max_message_mb``, else the default.
 
@@ -145,13 +154,14 @@ def open_session(cfg: TransportConfig, mode: str = "client", max_message_bytes: 
     every WAIT_LINE_EVERY_S with the time waited, and once more when connected; a caller that set
     ``connect_timeout_s`` and no ``who`` (a one-shot command: its own error names the endpoint)
     stays quiet. Nothing is added when the router is there: the open is waited for, not polled.
-    ``stop``: set (a SIGTERM handler) while waiting for the router, this raises InterruptedError."""
+    ``stop``: set (a SIGTERM handler) while waiting for the router, this raises InterruptedError.
+    ``batching``: see ``session_config`` (False on the sample path)."""
     if max_message_bytes is None:
         max_message_bytes = int(cfg.max_message_mb * 2**20) if cfg.max_message_mb else DEFAULT_MAX_MESSAGE_BYTES
     quiet = connect_timeout_s is not None and who is None
     if connect_timeout_s is None:
         connect_timeout_s = cfg.connect_timeout_s or None  # transport.connect_timeout_s; 0 = wait forever
-    conf = session_config(cfg.router, mode, max_message_bytes, connect_timeout_s)
+    conf = session_config(cfg.router, mode, max_message_bytes, connect_timeout_s, batching)
     if mode != "client":
         return zenoh.open(conf)  # a router only binds its port: nothing to wait for
     bound = f", giving up after {connect_timeout_s:g} s" if connect_timeout_s is not None else ""
@@ -364,8 +374,8 @@ class StopSignal:
         self._latest.close()
 
 
-def serve_queries(session: zenoh.Session, key: str, handler: Callable[[bytes], bytes], stop: threading.Event,
-                  name: str = "queryable") -> threading.Thread:
+def serve_queries(session: zenoh.Session, key: str, handler: Callable[[bytes], bytes | bytearray],
+                  stop: threading.Event, name: str = "queryable") -> threading.Thread:
     """Answer queries on ``key`` from a worker thread (not in zenoh's callback thread).
 
     ``handler`` gets the query payload and returns the reply payload. A handler exception is

@@ -630,7 +630,7 @@ def bench(args: argparse.Namespace, log: TextIO = sys.stderr) -> dict:
     b.bar = progress(total=phases, desc="bench replay", unit="phase")
     try:
         b.start_router()
-        b.session = transport.open_session(TransportConfig(router=b.endpoint))
+        b.session = transport.open_session(TransportConfig(router=b.endpoint), batching=False)  # as the learner
         result: dict[str, Any] = {
             "config": {"duration_s": args.duration, "warmup_s": args.warmup, "batch": args.batch,
                        "publisher_processes": args.publishers, "sample_batch": SAMPLE_BATCH,

@@ -238,7 +238,9 @@ class _ShardBench:
         names = self.start_servers(run_id, shards)
         pubs: list[dict] = []
         try:
-            with transport.open_session(TransportConfig(router=self.endpoint, run_id=run_id)) as session:
+            # The learner's client, opened as the learner opens its session (unbatched).
+            client_cfg = TransportConfig(router=self.endpoint, run_id=run_id)
+            with transport.open_session(client_cfg, batching=False) as session:
                 clients = [ZenohReplayShard(session, wire.replay_namespace(run_id, i, shards), self.schema, 10.0,
                                             self.endpoint) for i in range(shards)]
                 replay = clients[0] if shards == 1 else ShardedReplay(clients)
