@@ -29,4 +29,6 @@ def test_bench_shards_json_end_to_end(capsys) -> None:
         assert all(rate > 0 for rate in row["ingest_per_shard"])  # a0..a3 reach every shard
         assert row["lost_batches"] == 0 and row["rejected"] == 0 and row["never_stored"] == 0
         assert row["sample_idle"]["n"] >= 20 and row["sample_idle"]["p99_ms"] >= row["sample_idle"]["p50_ms"] > 0
+        for floor in (row["floor_idle"], row["floor_under_ingest"]):  # the zero-work queryable answered
+            assert floor["n"] >= 20 and floor["p99_ms"] >= floor["p50_ms"] > 0
     assert descendants(os.getpid()) == before  # every child process is gone

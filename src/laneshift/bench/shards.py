@@ -14,7 +14,11 @@ its shard (``wire.shard_of``), as fast as BLOCK lets it. Measured for each shard
 - sample latency: ``SampleRequest(256)`` through the learner's own client (one
   ``learner.links.ZenohReplayShard``, or ``learner.shards.ShardedReplay`` over one per shard:
   requests to every shard in parallel, merge, shuffle), idle and under saturating ingest (a
-  second window).
+  second window);
+- the transport's floor beside it (``floor_*``): the same client asking a queryable in a process of
+  its own that answers every request with one fixed BATCH of 256 rows (the same bytes a shard
+  sends, prepared once), so the server's own work is nil. What sample latency the router, zenoh,
+  the client's decode and the machine's scheduling leave, idle and under the same ingest.
 
     laneshift bench shards --shards 1,2,4 --json
 
@@ -80,6 +84,8 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if argv and argv[0] == "_publish":
         return _publisher_main(argv[1:])
+    if argv and argv[0] == "_floor":
+        return _floor_main(argv[1:])
     p = argparse.ArgumentParser(prog="python -m laneshift.bench.shards")
     _add_arguments(p)
     return run(p.parse_args(argv))
@@ -124,6 +130,35 @@ def _publisher_main(argv: list[str]) -> int:
     return 0
 
 
+FLOOR_NAMESPACE = "bench-floor"
+
+
+def _floor_main(argv: list[str]) -> int:
+    """A queryable on ``FLOOR_NAMESPACE``'s sample key that answers with one prepared BATCH of
+    SAMPLE_BATCH rows, opened as a replay server opens its query session, until SIGTERM."""
+    p = argparse.ArgumentParser(prog="python -m laneshift.bench.shards _floor")
+    for name in ("--router", "--ready"):
+        p.add_argument(name, required=True)
+    a = p.parse_args(argv)
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    schema, n = _vector_schema(), SAMPLE_BATCH
+    obs = np.zeros((n, *schema.obs_shape), np.dtype(schema.obs_dtype))
+    reply = bytes(wire.encode_batch(wire.SampledBatch(
+        obs=obs, action=np.zeros(n, np.int64), reward=np.zeros(n, np.float32), next_obs=obs,
+        terminated=np.zeros(n, np.uint8), steps=np.ones(n, np.uint8), is_demo=np.zeros(n, np.uint8),
+        index=np.arange(n, dtype=np.int64), weight=np.ones(n, np.float32), info={"phase": 0, "prioritized": False})))
+    transport.use_service_runtime()
+    with transport.open_session(TransportConfig(router=a.router), batching=False) as session:
+        transport.serve_queries(session, wire.sample_key(FLOOR_NAMESPACE), lambda _: reply, stop, "floor")
+        Path(a.ready).write_text("ready")
+        parent = os.getppid()
+        while not stop.wait(0.2) and os.getppid() == parent:
+            pass
+    return 0
+
+
 def _vector_schema() -> wire.TransitionSchema:
     from laneshift.actors.envs import spec_of
     from laneshift.config import EnvConfig
@@ -156,6 +191,18 @@ class _ShardBench:
     def start_router(self) -> None:
         self.group.start("router", [*self.host(0), *self.py, "router", "--listen", self.endpoint])
         wait_for_router(self.endpoint, self.check_router)
+
+    def start_floor(self) -> None:
+        """The zero-work queryable (``_floor_main``), where shard 0 runs."""
+        from laneshift.deploy.processes import ChildFailed, wait_for_file
+
+        ready = self.work / "floor.ready"
+        self.group.start("floor", [*self.host(0), sys.executable, "-m", "laneshift.bench.shards", "_floor",
+                                   "--router", self.endpoint, "--ready", str(ready)])
+        try:
+            wait_for_file(ready, 60, self.group, "floor")
+        except ChildFailed as exc:
+            raise BenchError(str(exc)) from None
 
     def check_router(self) -> None:
         from laneshift.deploy.processes import ChildFailed
@@ -244,6 +291,7 @@ class _ShardBench:
                 clients = [ZenohReplayShard(session, wire.replay_namespace(run_id, i, shards), self.schema, 10.0,
                                             self.endpoint) for i in range(shards)]
                 replay = clients[0] if shards == 1 else ShardedReplay(clients)
+                floor = ZenohReplayShard(session, FLOOR_NAMESPACE, self.schema, 10.0, self.endpoint)
 
                 def stats() -> list[dict]:
                     out = [c.replay_stats() for c in clients]
@@ -268,12 +316,14 @@ class _ShardBench:
                 s1 = stats()
                 cores = meter.cores()
                 loaded = _latency(replay, a.duration)
+                floor_loaded = _latency(floor, a.duration)
                 sent = self.stop_publishers(pubs)
                 pubs = []
                 per_shard = [(b["tables"]["online"]["inserted"] - x["tables"]["online"]["inserted"])
                              / max(b["uptime_s"] - x["uptime_s"], 1e-9) for x, b in zip(s0, s1)]
                 time.sleep(0.5)  # the servers drain their queues, then idle
                 idle = _latency(replay, a.duration)
+                floor_idle = _latency(floor, a.duration)
                 end = stats()
                 lost = sum(int(s["actors_total"]["lost_batches"]) for s in end)
                 stored = sum(int(s["actors_total"]["items"]) for s in end)
@@ -285,7 +335,8 @@ class _ShardBench:
                     "server_cpu_us_per_transition": round(server_us, 2) if server_us else None,
                     "router_cpu_us_per_transition": round(router_us, 2) if router_us else None,
                     "ingest_per_shard": [round(r, 1) for r in per_shard], "sample_idle": idle,
-                    "sample_under_ingest": loaded, "cores_under_ingest": cores,
+                    "sample_under_ingest": loaded, "floor_idle": floor_idle, "floor_under_ingest": floor_loaded,
+                    "cores_under_ingest": cores,
                     "sent": sum(sent.values()) if sent else None, "stored": stored,
                     "never_stored": (sum(sent.values()) - stored) if sent else None,
                     "lost_batches": lost, "rejected": rejected}
@@ -319,12 +370,15 @@ def bench(args: argparse.Namespace, log: TextIO = sys.stderr) -> dict:
     old_term = signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt()))
     try:
         b.start_router()
+        b.start_floor()
         rows = []
         for n in counts:
             b.say(f"{n} shard(s): {args.actors} actors over {args.publishers} publisher processes")
             rows.append(b.measure(n))
-            b.say(f"{n} shard(s): {rows[-1]['ingest_per_s']:,.0f} transitions/s stored; sample p99 "
-                  f"{rows[-1]['sample_idle']['p99_ms']} ms idle, {rows[-1]['sample_under_ingest']['p99_ms']} ms under ingest")
+            row = rows[-1]
+            b.say(f"{n} shard(s): {row['ingest_per_s']:,.0f} transitions/s stored; sample p99 "
+                  f"{row['sample_idle']['p99_ms']} ms idle, {row['sample_under_ingest']['p99_ms']} ms under ingest "
+                  f"(the transport's floor: {row['floor_idle']['p99_ms']} and {row['floor_under_ingest']['p99_ms']} ms)")
         return {"bench": "shards", "batch": args.batch, "actors": args.actors, "publishers": args.publishers,
                 "capacity": args.capacity, "cpus": os.cpu_count(), "netns": b.namespaces, "router": b.endpoint,
                 "rows": rows}
@@ -339,12 +393,14 @@ def format_result(r: dict) -> str:
              f"transitions per message, capacity {r['capacity']:,} over all shards, {r['cpus']} CPUs"
              + (f"; namespaces {', '.join(r['netns'])} (router {r['router']})" if r.get("netns") else ""),
              f"{'shards':>6} {'stored/s':>10} {'per shard':>26} {'idle p50/p99 ms':>16} {'ingest p50/p99 ms':>18}"
-             f" {'lost':>5} {'never stored':>12} {'us/tr server':>12} {'router':>7}   cores servers/router/publishers/other"]
+             f" {'floor p99 idle/ingest':>21} {'lost':>5} {'never stored':>12} {'us/tr server':>12} {'router':>7}"
+             f"   cores servers/router/publishers/other"]
     for row in r["rows"]:
         c = row["cores_under_ingest"]
         lines.append(f"{row['shards']:>6} {row['ingest_per_s']:>10,.0f} {', '.join(f'{x:,.0f}' for x in row['ingest_per_shard']):>26}"
                      f" {row['sample_idle']['p50_ms']:>7.2f}/{row['sample_idle']['p99_ms']:<8.2f}"
                      f" {row['sample_under_ingest']['p50_ms']:>8.2f}/{row['sample_under_ingest']['p99_ms']:<9.2f}"
+                     f" {row['floor_idle']['p99_ms']:>10.2f}/{row['floor_under_ingest']['p99_ms']:<10.2f}"
                      f" {row['lost_batches']:>5} {row['never_stored'] if row['never_stored'] is not None else '-':>12}"
                      f" {row['server_cpu_us_per_transition'] or '-':>12} {row['router_cpu_us_per_transition'] or '-':>7}"
                      f"   {c.get('servers')}/{c.get('router')}/{c.get('publishers')}/{c.get('other')}")

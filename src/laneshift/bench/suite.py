@@ -154,7 +154,10 @@ def derive(r: dict) -> dict:
         # P7: ingest and sample latency by shard count (docs/scaling.md).
         "p7_shards": [{k: row.get(k) for k in ("shards", "ingest_per_s", "server_cpu_us_per_transition")}
                       | {"sample_p99_idle_ms": _get(row, "sample_idle", "p99_ms"),
-                         "sample_p99_under_ingest_ms": _get(row, "sample_under_ingest", "p99_ms")}
+                         "sample_p99_under_ingest_ms": _get(row, "sample_under_ingest", "p99_ms"),
+                         # A zero-work queryable's p99 beside it: what the transport and machine leave.
+                         "floor_p99_idle_ms": _get(row, "floor_idle", "p99_ms"),
+                         "floor_p99_under_ingest_ms": _get(row, "floor_under_ingest", "p99_ms")}
                       for row in _get(r, "shards", "rows") or []],
     }
 
