@@ -62,6 +62,7 @@ class ZenohReplayShard:
                  router: str):
         self.session, self.namespace, self.schema, self.timeout = session, namespace, schema, timeout_s
         self._priorities = transport.data_publisher(session, wire.priorities_key(namespace))
+        self._ask_sample = transport.Requester(session, wire.sample_key(namespace), timeout_s)
         # No answer from the replay server (not started yet, restarting, another run_id) is said in
         # one line after a few seconds, every 30 s while it lasts, and once when it answers.
         self.replay_wait = transport.WaitLines(
@@ -77,8 +78,7 @@ class ZenohReplayShard:
         return reply
 
     def sample(self, req: wire.SampleRequest) -> wire.SampledBatch | wire.WireError | None:
-        reply = self._answered(transport.query_ok(self.session, wire.sample_key(self.namespace),
-                                                  wire.encode_sample_request(req), self.timeout))
+        reply = self._answered(self._ask_sample(wire.encode_sample_request(req)))
         if reply is None or isinstance(reply, wire.WireError):
             return reply
         return wire.decode_batch(reply, self.schema)

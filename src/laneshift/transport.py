@@ -422,12 +422,31 @@ def query(session: zenoh.Session, key: str, payload: bytes, timeout_s: float) ->
 
 def query_ok(session: zenoh.Session, key: str, payload: bytes, timeout_s: float) -> bytes | WireError | None:
     """Like ``query``, but an ERROR reply comes back decoded as a WireError."""
+    return _error_decoded(query(session, key, payload, timeout_s))
+
+
+def _error_decoded(data: bytes | None) -> bytes | WireError | None:
     from .wire import Kind, decode_error, peek_kind
 
-    data = query(session, key, payload, timeout_s)
     if data is not None and peek_kind(data) == Kind.ERROR:
         return decode_error(data)
     return data
+
+
+class Requester:
+    """``query_ok`` to one fixed key through a declared zenoh Querier, for a key asked thousands of
+    times a second (the learner's sample requests): the querier keeps the key's routing between
+    requests instead of resolving it per ``get``. Against the zero-work queryable of ``bench
+    shards``, alternating: p50 0.43-0.51 ms against 0.46-0.58 ms for ``session.get``."""
+
+    def __init__(self, session: zenoh.Session, key: str, timeout_s: float):
+        self._querier = session.declare_querier(key, timeout=timeout_s)
+
+    def __call__(self, payload: bytes) -> bytes | WireError | None:
+        for reply in self._querier.get(payload=payload):
+            if reply.ok is not None:
+                return _error_decoded(reply.ok.payload.to_bytes())
+        return None
 
 
 def wait_for(predicate: Callable[[], bool], timeout_s: float, interval_s: float = 0.05) -> bool:
