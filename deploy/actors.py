@@ -200,11 +200,11 @@ class LearnerActor(_Service):
         import torch
 
         from laneshift import transport
-        from laneshift.learner.loop import set_learner_switch_interval
+        from laneshift.learner.loop import tune_learner_process
 
         cfg = self._begin(plain)
         torch.set_num_threads(cfg.learner.torch_threads)
-        set_learner_switch_interval()
+        tune_learner_process()
         builder = Builder(cfg, self.spec)
         self.session = transport.open_session(cfg.transport, max_message_bytes=cfg.max_message_bytes, who="learner",
                                               batching=False)  # sample requests: see session_config

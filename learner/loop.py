@@ -528,7 +528,7 @@ LEARNER_SWITCH_INTERVAL_S = 0.0005
 
 
 #: glibc malloc in the learner process: blocks up to this size come from the heap, not from a
-#: fresh mmap, and freed heap is returned to the system only above M_TRIM_BYTES. With glibc's
+#: fresh mmap, and freed heap goes back to the system only above TRIM_THRESHOLD_BYTES. With glibc's
 #: defaults every update's 256 KB activations and each decoded 175 KB batch were mapped and
 #: unmapped anew: 5,000-8,000 page faults a second at ~185 updates/s, 4 % of a core in the kernel
 #: (a 40,000-step run, /proc/<pid>/stat); with these, about 5 a second. The learner's working set
@@ -537,7 +537,7 @@ MMAP_THRESHOLD_BYTES = 8 * 2**20
 TRIM_THRESHOLD_BYTES = 64 * 2**20
 
 
-def set_learner_switch_interval() -> None:
+def tune_learner_process() -> None:
     """The learner process's own settings: the GIL switch interval and its allocator."""
     sys.setswitchinterval(LEARNER_SWITCH_INTERVAL_S)
     _tune_malloc()
@@ -568,7 +568,7 @@ def run_learner(cfg: RunConfig, spec: EnvSpec, evaluate: EvaluatePolicy | None =
     # made the run slower (0.71x and 0.95x env steps/s, issue 13); raise it on a node whose cores
     # the learner has to itself.
     torch.set_num_threads(cfg.learner.torch_threads)
-    set_learner_switch_interval()
+    tune_learner_process()
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
