@@ -308,7 +308,7 @@ class ReplayCore:
             # All rows online, in a record table: one gather of whole records (storage.record_dtype).
             # The batch's columns are views of it; encode_batch copies each once, into the reply.
             picked = np.take(records, online_rows, mode="clip")
-            np.take(self.online.key, online_rows, out=index, mode="clip")
+            _take(self.online.key, online_rows, index)
             return SampledBatch(obs=picked["obs"], action=picked["action"], reward=picked["reward"],
                                 next_obs=picked["next_obs"], terminated=picked["terminated"], steps=picked["steps"],
                                 is_demo=is_demo.view(np.uint8), index=index, weight=weight, num_batches=nb, info=info)

@@ -24,7 +24,7 @@ import socket
 import sys
 import threading
 import time
-from typing import Callable
+from typing import Any, Callable
 
 import zenoh
 
@@ -414,7 +414,12 @@ def serve_queries(session: zenoh.Session, key: str, handler: Callable[[bytes], b
 
 def query(session: zenoh.Session, key: str, payload: bytes, timeout_s: float) -> bytes | None:
     """One request/reply; None when nobody answered in time."""
-    for reply in session.get(key, payload=payload, timeout=timeout_s):
+    return _first_ok(session.get(key, payload=payload, timeout=timeout_s))
+
+
+def _first_ok(replies: Any) -> bytes | None:
+    """The first successful reply's payload from a get's replies, or None."""
+    for reply in replies:
         if reply.ok is not None:
             return reply.ok.payload.to_bytes()
     return None
@@ -443,10 +448,7 @@ class Requester:
         self._querier = session.declare_querier(key, timeout=timeout_s)
 
     def __call__(self, payload: bytes) -> bytes | WireError | None:
-        for reply in self._querier.get(payload=payload):
-            if reply.ok is not None:
-                return _error_decoded(reply.ok.payload.to_bytes())
-        return None
+        return _error_decoded(_first_ok(self._querier.get(payload=payload)))
 
 
 def wait_for(predicate: Callable[[], bool], timeout_s: float, interval_s: float = 0.05) -> bool:
