@@ -143,12 +143,10 @@ def _floor_main(argv: list[str]) -> int:
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
-    schema, n = _vector_schema(), SAMPLE_BATCH
-    obs = np.zeros((n, *schema.obs_shape), np.dtype(schema.obs_dtype))
-    reply = bytes(wire.encode_batch(wire.SampledBatch(
-        obs=obs, action=np.zeros(n, np.int64), reward=np.zeros(n, np.float32), next_obs=obs,
-        terminated=np.zeros(n, np.uint8), steps=np.ones(n, np.uint8), is_demo=np.zeros(n, np.uint8),
-        index=np.arange(n, dtype=np.int64), weight=np.ones(n, np.float32), info={"phase": 0, "prioritized": False})))
+    from .learner import Case, sampled_batch
+
+    schema = _vector_schema()
+    reply = bytes(wire.encode_batch(sampled_batch(Case("floor", schema.obs_shape, "float32", SAMPLE_BATCH), 1)))
     transport.use_service_runtime()
     with transport.open_session(TransportConfig(router=a.router), batching=False) as session:
         transport.serve_queries(session, wire.sample_key(FLOOR_NAMESPACE), lambda _: reply, stop, "floor")
