@@ -25,7 +25,7 @@ from laneshift import wire
 from laneshift.config import RunConfig
 
 from laneshift.learner.links import ReplayThrough
-from laneshift.learner.shards import ShardedReplay
+from laneshift.learner.shards import PendingSample, ShardedReplay
 
 from .builder import Builder
 
@@ -86,6 +86,11 @@ class InProcessReplay:
         if wire.peek_kind(reply) == wire.Kind.ERROR:
             return wire.decode_error(reply)
         return wire.decode_batch(reply, self.schema)
+
+    def request_sample(self, req: wire.SampleRequest) -> PendingSample:
+        """In one process there is nothing to overlap: the sample is drawn now."""
+        batch = self.sample(req)
+        return lambda: batch
 
     def send_priorities(self, payload: bytes) -> None:
         self.core.handle_priorities(payload)

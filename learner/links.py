@@ -2,7 +2,8 @@
 
 - ``ReplayClient``: ``sample(SampleRequest)`` -> SampledBatch, a WireError (not ready / rate
   limited) or None; ``send_priorities(bytes)``; ``replay_stats()`` / ``replay_control(body)``
-  (one replay server: ``ZenohReplayShard``; several: ``shards.ShardedReplay`` over one each);
+  (one replay server: ``ZenohReplayShard``; several: ``shards.ShardedReplay`` over one each, a
+  ``ReplayShardClient``, which can also send a request before waiting for it: ``request_sample``);
 - ``WeightsPublisher``: ``publish_weights(bytes)`` (safetensors with a version, ``laneshift.qnet``);
 - ``RunChannel``: ``take_episodes()`` (the workers' episode records, as sent: the learner
   validates and counts them), ``publish_stats(bytes)``, ``stop_requested()``, ``stop_all()``.
@@ -21,7 +22,7 @@ import zenoh
 from laneshift import transport, wire
 from laneshift.config import RunConfig
 
-from .shards import ShardedReplay
+from .shards import PendingSample, ShardedReplay
 
 T = TypeVar("T")
 
@@ -33,6 +34,13 @@ class ReplayClient(Protocol):
     def send_priorities(self, payload: bytes) -> None: ...
     def replay_stats(self) -> dict | None: ...
     def replay_control(self, body: dict) -> dict | None: ...
+
+
+class ReplayShardClient(ReplayClient, Protocol):
+    """One replay server of several: ``request_sample`` sends the request and returns the call
+    that waits for its reply, so ``ShardedReplay`` asks every shard before it waits for any."""
+
+    def request_sample(self, req: wire.SampleRequest) -> PendingSample: ...
 
 
 class WeightsPublisher(Protocol):
@@ -78,10 +86,18 @@ class ZenohReplayShard:
         return reply
 
     def sample(self, req: wire.SampleRequest) -> wire.SampledBatch | wire.WireError | None:
-        reply = self._answered(self._ask_sample(wire.encode_sample_request(req)))
-        if reply is None or isinstance(reply, wire.WireError):
-            return reply
-        return wire.decode_batch(reply, self.schema)
+        return self.request_sample(req)()
+
+    def request_sample(self, req: wire.SampleRequest) -> PendingSample:
+        pending = self._ask_sample.start(wire.encode_sample_request(req))
+
+        def reply() -> wire.SampledBatch | wire.WireError | None:
+            data = self._answered(pending())
+            if data is None or isinstance(data, wire.WireError):
+                return data
+            return wire.decode_batch(data, self.schema)
+
+        return reply
 
     def replay_stats(self) -> dict | None:
         reply = self._answered(transport.query(self.session, wire.replay_stats_key(self.namespace), b"",

@@ -2,7 +2,8 @@
 
 With ``replay.shards`` = N each env worker sends to one shard (``wire.shard_of``, a stable
 function of its name) and each shard holds ``capacity / N`` items. ``ShardedReplay`` wraps one
-``ReplayClient`` per shard (zenoh or in-process alike) and keeps every rule of one replay server:
+``ReplayShardClient`` per shard (zenoh or in-process alike), sends every shard its part of a request
+before it waits for any reply (``request_sample``), and keeps every rule of one replay server:
 
 - **Uniform sampling over the union.** A request's rows are split over the shards in proportion
   to how many items each one samples over (``info["live"]`` of its last reply; equal shares until
@@ -35,7 +36,7 @@ from __future__ import annotations
 
 import concurrent.futures
 import threading
-from typing import TYPE_CHECKING, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence
 
 import numpy as np
 
@@ -43,7 +44,10 @@ from laneshift import wire
 from laneshift.replay_stats import merge_replay_stats
 
 if TYPE_CHECKING:  # links.py builds this class: no import cycle at run time
-    from .links import ReplayClient
+    from .links import ReplayShardClient
+
+# A sample request already sent: calling it waits for the reply (``ReplayShardClient.request_sample``).
+PendingSample = Callable[[], "wire.SampledBatch | wire.WireError | None"]
 
 
 def split_rows(rows: int, weights: Sequence[float]) -> list[int]:
@@ -64,9 +68,9 @@ def split_rows(rows: int, weights: Sequence[float]) -> list[int]:
 
 
 class ShardedReplay:
-    """A ``ReplayClient`` over one ``ReplayClient`` per shard (see the module's text)."""
+    """A ``ReplayClient`` over one ``ReplayShardClient`` per shard (see the module's text)."""
 
-    def __init__(self, shards: Sequence["ReplayClient"], beta: float = 0.4, seed: int = 0):
+    def __init__(self, shards: Sequence["ReplayShardClient"], beta: float = 0.4, seed: int = 0):
         if len(shards) < 2:
             raise ValueError("ShardedReplay needs at least 2 shards; use the one client itself")
         self.shards, self.n, self.beta = list(shards), len(shards), beta
@@ -76,6 +80,7 @@ class ShardedReplay:
         self.mass: list[float | None] = [None] * self.n  # its priority mass (prioritized replay)
         self.discarded_rows = 0  # rows drawn but beyond the last whole batch when a shard refused
         self.partial_requests = 0  # requests served by some shards only
+        # Stats and control commands to every shard at once (a few a second; samples need no pool).
         self._pool = concurrent.futures.ThreadPoolExecutor(max_workers=self.n, thread_name_prefix="replay-shard")
 
     # ------------------------------------------------------------------ sampling
@@ -95,8 +100,10 @@ class ShardedReplay:
         asks = {i: wire.SampleRequest(c, 1, req.min_version,
                                       tuple(a for a in req.actors if wire.shard_of(a, self.n) == i))
                 for i, c in enumerate(counts) if c > 0}
-        futures = {i: self._pool.submit(self.shards[i].sample, ask) for i, ask in asks.items()}
-        replies = {i: f.result() for i, f in futures.items()}
+        # Every shard is asked before any reply is awaited, all from this thread: the replies come
+        # in together while this thread waits, with no pool threads to wake or to take the GIL.
+        pending = {i: self.shards[i].request_sample(ask) for i, ask in asks.items()}
+        replies = {i: wait() for i, wait in pending.items()}
         served = {i: r for i, r in replies.items() if isinstance(r, wire.SampledBatch)}
         refused = [r for r in replies.values() if not isinstance(r, wire.SampledBatch)]
         with self._lock:

@@ -12,6 +12,8 @@ the code under test needs.
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import pytest
 
@@ -256,3 +258,32 @@ def test_inprocess_run_on_two_shards(tmp_path, sampler):
         # One priority message per shard and reply trained on (2 replies in flight at the end made none).
         served = replay["requests"]["served"]
         assert 0 < served - 2 * 2 <= replay["sampler"]["priority_updates"] <= served
+
+
+def test_every_shard_is_asked_before_any_reply_is_awaited():
+    """The sample path asks all shards from the calling thread first, then collects: the replies
+    are in flight together, and no pool thread is woken per request."""
+    cs = cores(3, [300, 300, 300])
+    events: list[tuple[str, int]] = []
+    threads: set[str] = set()
+
+    class Recorded(InProcessReplay):
+        def __init__(self, core, i):
+            super().__init__(core, SCHEMA)
+            self.i = i
+
+        def request_sample(self, req):
+            events.append(("ask", self.i))
+            threads.add(threading.current_thread().name)
+            batch = self.sample(req)
+
+            def reply():
+                events.append(("wait", self.i))
+                return batch
+            return reply
+
+    replay = ShardedReplay([Recorded(c, i) for i, c in enumerate(cs)], seed=0)
+    batch = replay.sample(wire.SampleRequest(96))
+    assert isinstance(batch, wire.SampledBatch) and len(batch.action) == 96
+    assert events == [("ask", 0), ("ask", 1), ("ask", 2), ("wait", 0), ("wait", 1), ("wait", 2)]
+    assert threads == {threading.current_thread().name}

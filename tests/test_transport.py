@@ -59,3 +59,32 @@ def test_slow_subscriber_gets_every_large_message_in_order() -> None:
         assert not consumer.is_alive(), f"only {len(got)} of {n} messages arrived"
         assert got == list(range(n))
         assert sub.try_recv() is None
+
+
+def test_requests_started_together_are_answered_together() -> None:
+    """``Requester.start`` sends at once and waits only when called: two queryables that each take
+    0.4 s to answer, asked one after the other without waiting, answer in about 0.4 s, not 0.8
+    (``learner.shards.ShardedReplay`` asks its shards this way from one thread)."""
+    cfg = TransportConfig(router=f"tcp/127.0.0.1:{transport.free_tcp_port()}", run_id="t")
+    stop = threading.Event()
+
+    def slow(name: bytes):
+        def answer(payload: bytes) -> bytes:
+            time.sleep(0.4)
+            return name + payload
+        return answer
+
+    with zenoh.open(transport.session_config(cfg.router, "router")), \
+            transport.open_session(cfg, batching=False) as server, \
+            transport.open_session(cfg, batching=False) as client:
+        transport.serve_queries(server, "t/a", slow(b"a:"), stop, "a")
+        transport.serve_queries(server, "t/b", slow(b"b:"), stop, "b")
+        ask_a, ask_b = transport.Requester(client, "t/a", 5.0), transport.Requester(client, "t/b", 5.0)
+        assert transport.wait_for(lambda: ask_a(b"") is not None and ask_b(b"") is not None, 30)
+        t0 = time.monotonic()
+        pending = [ask_a.start(b"1"), ask_b.start(b"2")]
+        replies = [wait() for wait in pending]
+        took = time.monotonic() - t0
+        stop.set()
+    assert replies == [b"a:1", b"b:2"]
+    assert took < 0.75, f"the two requests took {took:.2f} s: they did not overlap"

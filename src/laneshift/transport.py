@@ -448,7 +448,14 @@ class Requester:
         self._querier = session.declare_querier(key, timeout=timeout_s)
 
     def __call__(self, payload: bytes) -> bytes | WireError | None:
-        return _error_decoded(_first_ok(self._querier.get(payload=payload)))
+        return self.start(payload)()
+
+    def start(self, payload: bytes) -> Callable[[], bytes | WireError | None]:
+        """Send the request now; the returned call waits for its reply. Several requests started
+        before any is awaited travel together (``learner.shards.ShardedReplay`` asks every shard
+        this way from one thread)."""
+        replies = self._querier.get(payload=payload)
+        return lambda: _error_decoded(_first_ok(replies))
 
 
 def wait_for(predicate: Callable[[], bool], timeout_s: float, interval_s: float = 0.05) -> bool:
