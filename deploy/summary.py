@@ -78,13 +78,17 @@ def summarise(run: Run, why: str, wall: float, out: TextIO) -> dict:
 
 def wait_shares(summaries: list[dict], last: dict) -> dict[str, float]:
     """Which side bounded the run: the workers' share of their time blocked by the replay's rate
-    limiter (the learner was behind the ratio), and the learner's share waiting for a sampled
-    batch (the workers or the replay were behind). In the run's result as ``waits`` (``bench run``
-    reads it there); empty before the learner reported."""
+    limiter (the learner was behind the ratio), and the learner's share, from its first batch on,
+    waiting for a sampled batch (the workers or the replay were behind; before the first batch it
+    waits for the replay to fill, by design). In the run's result as ``waits`` (``bench run`` reads
+    it there); empty before the learner reported."""
     if not summaries or not last.get("elapsed_s"):
         return {}
     workers = sum(s.get("rate_limited_s", 0.0) for s in summaries) / max(sum(s["wall_s"] for s in summaries), 1e-6)
-    learner = float(last.get("sample_wait_s") or 0.0) / max(float(last["elapsed_s"]), 1e-6)
+    if last.get("training_s"):
+        learner = float(last.get("training_wait_s") or 0.0) / max(float(last["training_s"]), 1e-6)
+    else:  # a learner that never trained (or an older status): its whole life
+        learner = float(last.get("sample_wait_s") or 0.0) / max(float(last["elapsed_s"]), 1e-6)
     return {"workers_rate_limited_share": round(workers, 3), "learner_sample_wait_share": round(learner, 3)}
 
 

@@ -83,6 +83,9 @@ def test_the_waits_say_which_side_bounded_the_run():
         [dict(workers[0], rate_limited_s=0.1)], {"sample_wait_s": 4.0, "elapsed_s": 10.0}))[0]
     sync = load_run_config(overrides={"train.parallel": "sync"})
     assert waits_line(sync, wait_shares(workers, learner)) == []  # sync waits by design
+    # From its first batch on: the 2 s the learner waited for the replay to fill are not the workers'.
+    filled = {"sample_wait_s": 2.3, "elapsed_s": 12.0, "training_s": 10.0, "training_wait_s": 0.3}
+    assert wait_shares(workers, filled)["learner_sample_wait_share"] == 0.03
 
 
 def test_derive_bounds_p1_by_the_bare_loop_before_and_after_the_run():

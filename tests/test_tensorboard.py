@@ -303,3 +303,30 @@ def test_learner_prometheus_endpoint_serves_its_status():
     assert float(lines["laneshift_learner_sample_wait_ratio"]) == 0.04
     assert "laneshift_learner_episode_return_mean" not in lines  # None: not reported, not 0
     assert "laneshift_learner_updates_total counter" in text and "process_cpu_seconds_total" in lines
+
+
+def test_the_wait_for_the_replay_to_fill_is_not_counted_as_the_workers_bounding_the_run(tmp_path):
+    """Until its first batch the learner waits for replay.min_size items, by design: the run's
+    ``training_wait_s`` starts at the first batch, ``sample_wait_s`` (every interval's share) at the start."""
+
+    class Filling(FakeLinks):
+        def __init__(self) -> None:
+            super().__init__()
+            self.refuse_until = time.monotonic() + 0.6
+
+        def sample(self, req: wire.SampleRequest):
+            if time.monotonic() < self.refuse_until:
+                err = wire.WireError("rate_limited", "filling")
+                err.retry_after_ms = 5  # type: ignore[attr-defined]
+                return err
+            return super().sample(req)
+
+    links = Filling()
+    learner = _learner(tmp_path, links)
+    learner.publish()
+    while learner.agent.updates < 6:
+        learner._async_step()
+    status = learner._status()
+    learner._finish()
+    assert status["sample_wait_s"] >= 0.5  # the fill, waited by the update thread
+    assert status["training_s"] is not None and status["training_wait_s"] < 0.25
