@@ -13,12 +13,13 @@ its shard (``wire.shard_of``), as fast as BLOCK lets it. Measured for each shard
   /proc, and the servers' and router's CPU per stored transition;
 - sample latency: ``SampleRequest(256)`` through the learner's own client (one
   ``learner.links.ZenohReplayShard``, or ``learner.shards.ShardedReplay`` over one per shard:
-  requests to every shard in parallel, merge, shuffle), idle and under saturating ingest (a
-  second window);
-- the transport's floor beside it (``floor_*``): the same client asking a queryable in a process of
-  its own that answers every request with one fixed BATCH of 256 rows (the same bytes a shard
-  sends, prepared once), so the server's own work is nil. What sample latency the router, zenoh,
-  the client's decode and the machine's scheduling leave, idle and under the same ingest.
+  every shard asked before any reply is awaited, merge, shuffle), idle and under saturating
+  ingest (a second window);
+- the transport's floor beside it (``floor_*``): the same client asking N queryables (one per
+  shard, each in a process of its own, ``ShardedReplay`` over them as over the shards) that answer
+  every request with one fixed BATCH (the same bytes a shard sends, prepared once), so the
+  servers' own work is nil. What sample latency the router, zenoh, N processes answering at once,
+  the client's decode and merge and the machine's scheduling leave, idle and under the same ingest.
 
     laneshift bench shards --shards 1,2,4 --json
 
@@ -133,12 +134,19 @@ def _publisher_main(argv: list[str]) -> int:
 FLOOR_NAMESPACE = "bench-floor"
 
 
+def floor_namespace(i: int) -> str:
+    """Zero-work queryable ``i``'s namespace (``FLOOR_NAMESPACE`` itself for the first)."""
+    return FLOOR_NAMESPACE if i == 0 else f"{FLOOR_NAMESPACE}-{i}"
+
+
 def _floor_main(argv: list[str]) -> int:
-    """A queryable on ``FLOOR_NAMESPACE``'s sample key that answers with one prepared BATCH of
-    SAMPLE_BATCH rows, opened as a replay server opens its query session, until SIGTERM."""
+    """A queryable on ``floor_namespace(--index)``'s sample key that answers with one prepared
+    BATCH of ``--rows`` rows, opened as a replay server opens its query session, until SIGTERM."""
     p = argparse.ArgumentParser(prog="python -m laneshift.bench.shards _floor")
     for name in ("--router", "--ready"):
         p.add_argument(name, required=True)
+    p.add_argument("--index", type=int, default=0)
+    p.add_argument("--rows", type=int, default=SAMPLE_BATCH, help="rows of the prepared reply (a shard's part)")
     a = p.parse_args(argv)
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -146,10 +154,10 @@ def _floor_main(argv: list[str]) -> int:
     from .learner import Case, sampled_batch
 
     schema = _vector_schema()
-    reply = bytes(wire.encode_batch(sampled_batch(Case("floor", schema.obs_shape, "float32", SAMPLE_BATCH), 1)))
+    reply = bytes(wire.encode_batch(sampled_batch(Case("floor", schema.obs_shape, "float32", a.rows), 1, seed=a.index)))
     transport.use_service_runtime()
     with transport.open_session(TransportConfig(router=a.router), batching=False) as session:
-        transport.serve_queries(session, wire.sample_key(FLOOR_NAMESPACE), lambda _: reply, stop, "floor")
+        transport.serve_queries(session, wire.sample_key(floor_namespace(a.index)), lambda _: reply, stop, "floor")
         Path(a.ready).write_text("ready")
         parent = os.getppid()
         while not stop.wait(0.2) and os.getppid() == parent:
@@ -190,17 +198,26 @@ class _ShardBench:
         self.group.start("router", [*self.host(0), *self.py, "router", "--listen", self.endpoint])
         wait_for_router(self.endpoint, self.check_router)
 
-    def start_floor(self) -> None:
-        """The zero-work queryable (``_floor_main``), where shard 0 runs."""
+    def start_floors(self, shards: int) -> list[str]:
+        """One zero-work queryable (``_floor_main``) per shard, each where that shard runs, each
+        answering with a shard's part of a request (SAMPLE_BATCH / shards rows, as ``split_rows``
+        gives them at equal sizes)."""
         from laneshift.deploy.processes import ChildFailed, wait_for_file
+        from laneshift.learner.shards import split_rows
 
-        ready = self.work / "floor.ready"
-        self.group.start("floor", [*self.host(0), sys.executable, "-m", "laneshift.bench.shards", "_floor",
-                                   "--router", self.endpoint, "--ready", str(ready)])
+        names = []
+        for i, rows in enumerate(split_rows(SAMPLE_BATCH, [1.0] * shards)):
+            name = f"floor{shards}-{i}"
+            self.group.start(name, [*self.host(i), sys.executable, "-m", "laneshift.bench.shards", "_floor",
+                                    "--router", self.endpoint, "--ready", str(self.work / f"{name}.ready"),
+                                    "--index", str(i), "--rows", str(rows)])
+            names.append(name)
         try:
-            wait_for_file(ready, 60, self.group, "floor")
+            for name in names:
+                wait_for_file(self.work / f"{name}.ready", 60, self.group, name)
         except ChildFailed as exc:
             raise BenchError(str(exc)) from None
+        return names
 
     def check_router(self) -> None:
         from laneshift.deploy.processes import ChildFailed
@@ -280,7 +297,8 @@ class _ShardBench:
 
         a = self.args
         run_id = f"shards{shards}"
-        names = self.start_servers(run_id, shards)
+        servers = self.start_servers(run_id, shards)
+        names = servers + self.start_floors(shards)
         pubs: list[dict] = []
         try:
             # The learner's client, opened as the learner opens its session (unbatched).
@@ -289,7 +307,9 @@ class _ShardBench:
                 clients = [ZenohReplayShard(session, wire.replay_namespace(run_id, i, shards), self.schema, 10.0,
                                             self.endpoint) for i in range(shards)]
                 replay = clients[0] if shards == 1 else ShardedReplay(clients)
-                floor = ZenohReplayShard(session, FLOOR_NAMESPACE, self.schema, 10.0, self.endpoint)
+                floors = [ZenohReplayShard(session, floor_namespace(i), self.schema, 10.0, self.endpoint)
+                          for i in range(shards)]
+                floor = floors[0] if shards == 1 else ShardedReplay(floors)
 
                 def stats() -> list[dict]:
                     out = [c.replay_stats() for c in clients]
@@ -306,7 +326,7 @@ class _ShardBench:
                         raise BenchError(f"{run_id}: the tables did not fill in 300 s")
                     time.sleep(0.1)
                 # Window 1: ingest alone (the rate and its CPU); window 2: sample latency under it.
-                meter = _CpuMeter({"servers": [self.group.procs[n].pid for n in names],
+                meter = _CpuMeter({"servers": [self.group.procs[n].pid for n in servers],
                                    "router": [self.group.procs["router"].pid],
                                    "publishers": [p["proc"].pid for p in pubs]})
                 s0 = stats()
@@ -368,7 +388,6 @@ def bench(args: argparse.Namespace, log: TextIO = sys.stderr) -> dict:
     old_term = signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt()))
     try:
         b.start_router()
-        b.start_floor()
         rows = []
         for n in counts:
             b.say(f"{n} shard(s): {args.actors} actors over {args.publishers} publisher processes")
