@@ -6,6 +6,8 @@ the code under test needs.
 """
 from __future__ import annotations
 
+import pytest
+
 from laneshift.bench.suite import derive
 
 
@@ -95,5 +97,30 @@ def test_derive_bounds_p1_by_the_bare_loop_before_and_after_the_run():
          "peers": {"rllib": {"skipped": "no venv"}, "reverb": {"skipped": "no venv"}}}
     t = derive(r)
     assert t["p1_bound_env_steps_per_s"] == 150.0 * 256 / 32 == 1200.0 and t["p1_fraction_of_bound"] == 0.9
+    assert t["p1_bare_before_after"] == [140.0, 160.0] and t["p1_bound_resolved"] is False  # 14 % apart
+    r["bare_after_run"] = {"updates_per_s": 150.0}
+    assert derive(r)["p1_bound_resolved"] is True  # 7 % apart: within MAX_BARE_DRIFT
     r["bare_after_run"] = {"updates_per_s": None}  # the second measurement failed: the first alone
-    assert derive(r)["p1_bound_env_steps_per_s"] == 140.0 * 8
+    assert derive(r)["p1_bound_env_steps_per_s"] == 140.0 * 8 and derive(r)["p1_bound_resolved"] is False
+
+
+def test_bench_p1_flags_rounds_whose_bound_moved_and_summarises_the_rest(monkeypatch):
+    """Bare loop 100, 104, 160, 158 around three runs: the middle round's bound moved 54 % and its
+    fraction reads 1.14; it is listed, flagged, and left out of the resolved summary."""
+    from laneshift.bench import p1
+
+    bares = iter([100.0, 104.0, 160.0, 158.0])
+    runs = iter([700.0, 1200.0, 1000.0])
+    monkeypatch.setattr(p1, "bare_updates_per_s", lambda seconds, said_by: next(bares))
+    monkeypatch.setattr(p1, "bench_run", lambda args: {"rc": 0, "steady_env_steps_per_s": (x := next(runs)),
+                                                       "training_env_steps_per_s": x})
+    r = p1.bench_p1(rounds=3, ratio=32.0)
+    assert [row["resolved"] for row in r["rounds"]] == [True, False, True]
+    # 700 / (102 x 256 / 32), 1200 / (132 x 8), 1000 / (159 x 8)
+    assert [row["steady_fraction"] for row in r["rounds"]] == [0.86, 1.14, 0.79]
+    resolved = r["p1_steady_fraction_resolved"]
+    assert r["rounds_resolved"] == 2 and (resolved["min"], resolved["max"]) == (0.79, 0.86)
+    assert resolved["median"] == pytest.approx(0.825)
+    assert r["p1_steady_fraction"]["max"] == 1.14  # every round is still listed
+    text = p1.render(r)
+    assert "(!)" in text and "2 of 3" in text

@@ -26,7 +26,7 @@ import statistics
 from typing import Any
 
 from .run import bench_run
-from .suite import BATCH, bare_updates_per_s, learner_bound
+from .suite import BATCH, MAX_BARE_DRIFT, bare_drift, bare_updates_per_s, learner_bound
 
 
 def _r(x: float | None) -> float | None:
@@ -48,7 +48,9 @@ def bench_p1(rounds: int = 2, env_steps: int = 40_000, ratio: float = 32.0, trai
         if before and after and run.get("rc") == 0:
             bound = learner_bound(before, after, ratio)
             steady, whole = run.get("steady_env_steps_per_s"), run.get("training_env_steps_per_s")
-            row.update({"bound_env_steps_per_s": round(bound, 1), "steady_env_steps_per_s": steady,
+            drift = bare_drift(before, after)
+            row.update({"bound_env_steps_per_s": round(bound, 1), "bare_drift": round(drift, 3),
+                        "resolved": drift <= MAX_BARE_DRIFT, "steady_env_steps_per_s": steady,
                         "steady_updates_per_s": run.get("steady_updates_per_s"),
                         "training_env_steps_per_s": whole,
                         "steady_fraction": round(steady / bound, 2) if steady else None,
@@ -59,13 +61,17 @@ def bench_p1(rounds: int = 2, env_steps: int = 40_000, ratio: float = 32.0, trai
         else:
             row["error"] = run.get("error") or "a bare loop measurement failed"
         rows.append(row)
-    steady = [r["steady_fraction"] for r in rows if r.get("steady_fraction")]
-    whole = [r["whole_fraction"] for r in rows if r.get("whole_fraction")]
-    return {"train_args": args, "ratio": ratio, "batch": BATCH, "rounds": rows,
-            "p1_steady_fraction": {"min": min(steady), "median": statistics.median(steady), "max": max(steady)}
-            if steady else None,
-            "p1_whole_fraction": {"min": min(whole), "median": statistics.median(whole), "max": max(whole)}
-            if whole else None}
+    return {"train_args": args, "ratio": ratio, "batch": BATCH, "rounds": rows, "max_bare_drift": MAX_BARE_DRIFT,
+            "p1_steady_fraction": _spread(r.get("steady_fraction") for r in rows),
+            "p1_whole_fraction": _spread(r.get("whole_fraction") for r in rows),
+            # Only the rounds whose bound held still (the bare loop before and after within MAX_BARE_DRIFT).
+            "rounds_resolved": sum(1 for r in rows if r.get("resolved")),
+            "p1_steady_fraction_resolved": _spread(r.get("steady_fraction") for r in rows if r.get("resolved"))}
+
+
+def _spread(values: Any) -> dict | None:
+    xs = [x for x in values if x]
+    return {"min": min(xs), "median": statistics.median(xs), "max": max(xs)} if xs else None
 
 
 def _pct(x: float | None) -> str:
@@ -75,7 +81,7 @@ def _pct(x: float | None) -> str:
 def render(r: dict) -> str:
     lines = [f"laneshift train --local {r['train_args']}  (bound = bare updates/s x {r['batch']} / {r['ratio']:g})",
              f"  {'round':>5} {'bare before':>12} {'bare after':>11} {'bound':>8} {'steady':>8} {'of bound':>9} "
-             f"{'whole':>8} {'of bound':>9} {'workers limited':>16} {'learner waits':>14}"]
+             f"{'whole':>8} {'of bound':>9} {'workers limited':>16} {'learner waits':>14} {'bare drift':>11}"]
     for row in r["rounds"]:
         if "error" in row:
             lines.append(f"  {row['round']:>5} {row['error']}")
@@ -83,8 +89,13 @@ def render(r: dict) -> str:
         lines.append(f"  {row['round']:>5} {row['bare_before']:>12} {row['bare_after']:>11} {row['bound_env_steps_per_s']:>8} "
                      f"{row['steady_env_steps_per_s']:>8} {row['steady_fraction']:>9} {row['training_env_steps_per_s']:>8} "
                      f"{row['whole_fraction']:>9} {_pct(row.get('workers_rate_limited_share')):>16} "
-                     f"{_pct(row.get('learner_sample_wait_share')):>14}")
+                     f"{_pct(row.get('learner_sample_wait_share')):>14} "
+                     f"{_pct(row.get('bare_drift')) + ('' if row.get('resolved') else ' (!)'):>11}")
     lines.append(f"  P1 (steady, last two thirds of training): {r['p1_steady_fraction']}; whole window: {r['p1_whole_fraction']}")
+    lines.append(f"  rounds whose bare loop before and after agree within {r['max_bare_drift']:.0%}: {r['rounds_resolved']} "
+                 f"of {len(r['rounds'])}; P1 over them: {r['p1_steady_fraction_resolved']}"
+                 + ("" if r["rounds_resolved"] == len(r["rounds"]) else "  ((!): the machine's speed moved; that "
+                                                                      "round's fraction says little)"))
     return "\n".join(lines)
 
 
