@@ -94,11 +94,11 @@ class Learner:
         self._updates_at_last_log, self._steps_at_last_log, self._time_at_last_log = 0, 0, time.monotonic()
         self.last_status: dict = {}
         self.sample_wait_s = self._wait_at_last_log = 0.0  # the update thread's time waiting on a batch
-        # The same from the first batch on, and when that came: the wait while the replay fills to
-        # replay.min_size is by design, so the run's summary ("which side bounded the run") leaves
-        # it out. It was most of the 2-10 % the learner was said to wait (issue 13).
+        # When the first batch came, and sample_wait_s then: the wait while the replay fills to
+        # replay.min_size is by design, so the run's summary ("which side bounded the run") counts
+        # from here. It was most of the 2-10 % the learner was said to wait (issue 13).
         self.first_batch_at: float | None = None
-        self.training_wait_s = 0.0
+        self._wait_before_first_batch = 0.0
         self.checkpoint_failures = 0  # writes that failed (full disk, read-only dir): counted, retried later
         self._last_state_save = time.monotonic()
         self.restored_from: dict | None = self._restore()
@@ -311,12 +311,10 @@ class Learner:
         batch = self.prefetcher.take(timeout=0.5)  # refusals are waited out on the prefetch thread
         now = time.monotonic()
         self.sample_wait_s += now - waited  # the update thread idle: the actors bound the run
-        if self.first_batch_at is not None:
-            self.training_wait_s += now - waited
         if batch is None:
             return
         if self.first_batch_at is None:
-            self.first_batch_at = now
+            self.first_batch_at, self._wait_before_first_batch = now, self.sample_wait_s
         before = self.agent.updates
         self._updates(batch)
         if self.agent.updates // self.lcfg.publish_every > before // self.lcfg.publish_every:
@@ -405,7 +403,8 @@ class Learner:
             "sample_wait_share": round(min(wait_share, 1.0), 3), "sample_wait_s": round(self.sample_wait_s, 2),
             # Since the first batch (None before it): what deploy.summary.wait_shares divides.
             "training_s": round(now - self.first_batch_at, 2) if self.first_batch_at is not None else None,
-            "training_wait_s": round(self.training_wait_s, 2),
+            "training_wait_s": round(self.sample_wait_s - self._wait_before_first_batch, 2)
+            if self.first_batch_at is not None else 0.0,
             "return_mean": float(np.mean(self.returns)) if self.returns else None,
             "length_mean": float(np.mean(self.lengths)) if self.lengths else None,
             "crash_rate": float(np.mean(self.crashes)) if self.crashes else None,

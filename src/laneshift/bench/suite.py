@@ -147,6 +147,7 @@ def derive(r: dict) -> dict:
     run, peer = r["run"], r["peers"]["rllib"]
     # RUN_ARGS leaves replay.samples_per_insert at its default: the run's replay ratio.
     bound = learner_bound(bare, after, ratio=ReplayConfig().samples_per_insert) if bare else None
+    drift = bare_drift(bare, after)
     ours = run.get("training_env_steps_per_s")  # the whole of training, as RLlib's figure is read
     steady = run.get("steady_env_steps_per_s")  # its last two thirds: P1 (bench p1 repeats it in rounds)
     theirs = peer.get("env_steps_per_s") if isinstance(peer, dict) else None
@@ -158,7 +159,7 @@ def derive(r: dict) -> dict:
         "p1_whole_training_fraction_of_bound": round(ours / bound, 2) if ours and bound else None,
         # The bare loop before and after the run, and whether they agree within MAX_BARE_DRIFT.
         "p1_bare_before_after": [round(bare, 1) if bare else None, round(after, 1) if after else None],
-        "p1_bound_resolved": (lambda d: d is not None and d <= MAX_BARE_DRIFT)(bare_drift(bare, after)),
+        "p1_bound_resolved": drift is not None and drift <= MAX_BARE_DRIFT,
         "p8_peak_tree_rss_mb": run.get("peak_tree_rss_mb"), "p8_peak_tree_pss_mb": run.get("peak_tree_pss_mb"),
         "startup_first_stored_s": run.get("first_stored_s"),
         "vs_rllib_env_steps": round(ours / theirs, 1) if ours and theirs else None,
