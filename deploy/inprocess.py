@@ -25,7 +25,7 @@ from laneshift import wire
 from laneshift.config import RunConfig
 
 from laneshift.learner.links import ReplayThrough
-from laneshift.learner.shards import PendingSample, ShardedReplay
+from laneshift.learner.shards import PendingSample, replay_over
 
 from .builder import Builder
 
@@ -106,7 +106,7 @@ class InProcessLearnerLinks(ReplayThrough):
     def __init__(self, board: Board, schema: wire.TransitionSchema, beta: float = 0.4, seed: int = 0):
         self.board, self.schema = board, schema
         shards = [InProcessReplay(core, schema) for core in board.cores]
-        self.replay = shards[0] if len(shards) == 1 else ShardedReplay(shards, beta=beta, seed=seed)
+        self.replay = replay_over(shards, beta=beta, seed=seed)
 
     def publish_weights(self, payload: bytes) -> None:
         with self.board.cond:

@@ -22,7 +22,7 @@ import zenoh
 from laneshift import transport, wire
 from laneshift.config import RunConfig
 
-from .shards import PendingSample, ShardedReplay
+from .shards import PendingSample, replay_over
 
 T = TypeVar("T")
 
@@ -153,8 +153,7 @@ class ZenohLearnerLinks(ReplayThrough):
         n = cfg.replay.shards
         shards = [ZenohReplayShard(session, wire.replay_namespace(self.run_id, i, n), schema, self.timeout,
                                    cfg.transport.router) for i in range(n)]
-        self.replay: ReplayClient = shards[0] if n == 1 else ShardedReplay(
-            shards, beta=cfg.replay.priority_beta, seed=cfg.learner.seed)
+        self.replay: ReplayClient = replay_over(shards, beta=cfg.replay.priority_beta, seed=cfg.learner.seed)
 
     def publish_weights(self, payload: bytes) -> None:
         self._latest = payload

@@ -44,7 +44,7 @@ from laneshift import wire
 from laneshift.replay_stats import merge_replay_stats
 
 if TYPE_CHECKING:  # links.py builds this class: no import cycle at run time
-    from .links import ReplayShardClient
+    from .links import ReplayClient, ReplayShardClient
 
 # A sample request already sent: calling it waits for the reply (``ReplayShardClient.request_sample``).
 PendingSample = Callable[[], "wire.SampledBatch | wire.WireError | None"]
@@ -65,6 +65,12 @@ def split_rows(rows: int, weights: Sequence[float]) -> list[int]:
     if short:
         counts[np.argsort(-(exact - counts), kind="stable")[:short]] += 1
     return [int(c) for c in counts]
+
+
+def replay_over(shards: Sequence["ReplayShardClient"], beta: float = 0.4, seed: int = 0) -> "ReplayClient":
+    """The learner's ``ReplayClient`` for ``shards``: the one client itself, or ``ShardedReplay``
+    over several (``beta``, ``seed``: its importance weights and row shuffle)."""
+    return shards[0] if len(shards) == 1 else ShardedReplay(shards, beta=beta, seed=seed)
 
 
 class ShardedReplay:

@@ -293,7 +293,7 @@ class _ShardBench:
 
     def measure(self, shards: int) -> dict:
         from laneshift.learner.links import ZenohReplayShard
-        from laneshift.learner.shards import ShardedReplay
+        from laneshift.learner.shards import replay_over
 
         a = self.args
         run_id = f"shards{shards}"
@@ -306,10 +306,10 @@ class _ShardBench:
             with transport.open_session(client_cfg, batching=False) as session:
                 clients = [ZenohReplayShard(session, wire.replay_namespace(run_id, i, shards), self.schema, 10.0,
                                             self.endpoint) for i in range(shards)]
-                replay = clients[0] if shards == 1 else ShardedReplay(clients)
+                replay = replay_over(clients)
                 floors = [ZenohReplayShard(session, floor_namespace(i), self.schema, 10.0, self.endpoint)
                           for i in range(shards)]
-                floor = floors[0] if shards == 1 else ShardedReplay(floors)
+                floor = replay_over(floors)
 
                 def stats() -> list[dict]:
                     out = [c.replay_stats() for c in clients]
