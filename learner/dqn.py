@@ -42,6 +42,8 @@ from laneshift.config import LearnerConfig
 
 from laneshift.qnet import build_q_network
 
+from torch.optim.swa_utils import get_ema_multi_avg_fn
+
 from .optim import EagerAdam
 
 #: The metrics every update returns, in this order.
@@ -147,6 +149,16 @@ class DoubleDQN:
         self.online = build_q_network(obs_shape, n_actions, cfg.hidden, cfg.dueling, cfg.cnn).to(self.device)
         self.target = copy.deepcopy(self.online).requires_grad_(False)
         self._params = list(self.online.parameters())
+        # Weight averaging (learner.ema_decay): an exponential moving average of the online weights,
+        # the network the run hands out (``policy_net``). torch's own EMA arithmetic
+        # (swa_utils.get_ema_multi_avg_fn: one foreach lerp) on fixed parameter lists; not
+        # swa_utils.AveragedModel itself, whose update_parameters reads a counter tensor back on
+        # every call (a device sync per update on CUDA) and regroups the tensors each time.
+        self.averaged: torch.nn.Module | None = None
+        if cfg.ema_decay > 0:
+            self.averaged = copy.deepcopy(self.online).requires_grad_(False)
+            self._averaged_params = list(self.averaged.parameters())
+            self._ema = get_ema_multi_avg_fn(cfg.ema_decay)
         # The networks hold no BatchNorm, dropout or other batch- or mode-dependent layer (only
         # Linear, Conv2d, ReLU, Flatten, the dueling head's per-row mean), so a row's Q-values do not
         # depend on the other rows of the pass: one pass over cat(obs, next_obs) equals two passes.
@@ -174,21 +186,44 @@ class DoubleDQN:
         self.reset_optimizer()
 
     def reset_optimizer(self) -> None:
-        """Fresh Adam and target = online: the start of a new training run (rehearsal phase 2)."""
+        """Fresh Adam and target = online (and the average restarted there): the start of a new
+        training run (rehearsal phase 2)."""
         # Adam's coupled weight decay is plain L2 regularisation (MATLAB's L2RegularizationFactor).
         self.optimizer = EagerAdam(self._params, lr=self.cfg.lr, weight_decay=self.cfg.weight_decay,
                                    **self._adam_impl())
         self.target.load_state_dict(self.online.state_dict())
+        if self.averaged is not None:
+            self.averaged.load_state_dict(self.online.state_dict())
+
+    @property
+    def policy_net(self) -> torch.nn.Module:
+        """The network the run hands out (published weights, checkpoints, greedy evaluation): the
+        weight average with ``learner.ema_decay``, else the online network."""
+        return self.averaged if self.averaged is not None else self.online
+
+    @property
+    def lr(self) -> float:
+        return float(self.optimizer.param_groups[0]["lr"])
+
+    def set_lr(self, lr: float) -> None:
+        """The step size from now on (``learner.lr_final``'s schedule)."""
+        for group in self.optimizer.param_groups:
+            group["lr"] = lr
 
     def state_dict(self) -> dict:
         """Everything a restarted learner needs to go on as if nothing happened (tensors only,
         so ``torch.load(weights_only=True)`` reads it back without unpickling code)."""
-        return {"online": self.online.state_dict(), "target": self.target.state_dict(),
-                "optimizer": self.optimizer.state_dict(), "updates": torch.tensor(self.updates)}
+        state = {"online": self.online.state_dict(), "target": self.target.state_dict(),
+                 "optimizer": self.optimizer.state_dict(), "updates": torch.tensor(self.updates)}
+        if self.averaged is not None:
+            state["averaged"] = self.averaged.state_dict()
+        return state
 
     def load_state_dict(self, state: dict) -> None:
         self.online.load_state_dict(state["online"])
         self.target.load_state_dict(state["target"])
+        if self.averaged is not None:  # a state saved without averaging restarts the average at online
+            self.averaged.load_state_dict(state.get("averaged", state["online"]))
         self.optimizer.load_state_dict(state["optimizer"])
         # A saved param group carries its own foreach/fused flags (a state written before P5 has
         # the for-loop's None): the implementation is this code's choice, not the checkpoint's.
@@ -277,6 +312,8 @@ class DoubleDQN:
         loss.backward()
         grad_norm = torch.nn.utils.clip_grad_norm_(self._params, cfg.grad_clip, foreach=True)
         self.optimizer.step()
+        if self.averaged is not None:
+            self._ema(self._averaged_params, self._params, self.updates)
 
         self.updates += 1
         if self.updates % cfg.target_update_period == 0:
@@ -288,7 +325,7 @@ class DoubleDQN:
 
     @torch.no_grad()
     def greedy(self, obs: np.ndarray) -> np.ndarray:
-        return self.online(torch.as_tensor(obs, device=self.device)).argmax(dim=1).cpu().numpy()
+        return self.policy_net(torch.as_tensor(obs, device=self.device)).argmax(dim=1).cpu().numpy()
 
 
 def _obs_dtype(arr: Any) -> torch.dtype:

@@ -172,7 +172,7 @@ class Learner:
             _write_int(self.version_path, self.version)
         except OSError as exc:
             self._checkpoint_failed("published version", exc)
-        self.links.publish_weights(to_wire(self.agent.online, self.version, self.phase, self.agent.updates))
+        self.links.publish_weights(to_wire(self.agent.policy_net, self.version, self.phase, self.agent.updates))
 
     def checkpoint(self, name: str = "latest") -> Path | None:
         meta = {"version": self.version, "updates": self.agent.updates, "phase": self.phase,
@@ -181,7 +181,7 @@ class Learner:
                 "hidden": ",".join(map(str, self.lcfg.hidden)), "dueling": int(self.lcfg.dueling), "cnn": self.lcfg.cnn,
                 "env_steps": sum(self.actor_steps.values()), "elapsed_s": round(time.monotonic() - self.started, 1)}
         try:
-            return save_checkpoint(self.agent.online, self.run_dir / "checkpoints" / f"{name}.safetensors", meta)
+            return save_checkpoint(self.agent.policy_net, self.run_dir / "checkpoints" / f"{name}.safetensors", meta)
         except OSError as exc:  # a full disk or read-only run dir must not end training
             self._checkpoint_failed(f"{name} checkpoint", exc)
             return None
@@ -295,8 +295,16 @@ class Learner:
         if time.monotonic() < next_log:
             return next_log
         self._log()
+        self._follow_lr_schedule()
         self._maybe_save_state()
         return time.monotonic() + self.lcfg.log_every_s
+
+    def _follow_lr_schedule(self) -> None:
+        """``learner.lr_final``: the step size falls linearly from ``lr`` with the run's env steps
+        (read once per log interval; pre-training, which has none, keeps ``lr``)."""
+        if not self.lcfg.lr_final or self.phase == 1:
+            return
+        self.agent.set_lr(scheduled_lr(self.lcfg.lr, self.lcfg.lr_final, self.env_steps, self.cfg.train.env_steps))
 
     def _maybe_save_state(self) -> None:
         every = self.lcfg.checkpoint_every_s
@@ -395,7 +403,7 @@ class Learner:
         self._updates_at_last_log, self._steps_at_last_log, self._time_at_last_log = self.agent.updates, env_steps, now
         self._wait_at_last_log = self.sample_wait_s
         return {
-            "updates": self.agent.updates, "updates_per_s": round(ups, 1), "version": self.version,
+            "updates": self.agent.updates, "updates_per_s": round(ups, 1), "version": self.version, "lr": self.agent.lr,
             "phase": self.phase, "episodes": self.episodes, "bad_episode_records": self.bad_episode_records,
             "env_steps": env_steps, "env_steps_per_s": round(steps_per_s, 1),
             # Share of the interval the update thread waited for a sampled batch (async mode): near 0
@@ -449,7 +457,7 @@ class Learner:
     def _tb_scalars(self, status: dict) -> dict[str, float | None]:
         """TensorBoard's tags for one log interval (None values are left out by MetricsLog)."""
         tb: dict[str, float | None] = {f"learner/{k}": status.get(k) for k in METRIC_NAMES}
-        tb.update({f"learner/{k}": status[k] for k in ("updates", "updates_per_s", "version", "phase", "sample_wait_share")})
+        tb.update({f"learner/{k}": status[k] for k in ("updates", "updates_per_s", "version", "phase", "sample_wait_share", "lr")})
         tb.update({f"train/{k}": status[k] for k in ("env_steps_per_s", "episodes", "return_mean", "length_mean",
                                                       "crash_rate", "achievement_rate", "epsilon")})
         lags = status["version_lag"]
@@ -477,7 +485,7 @@ class Learner:
             return
         self._log_eval(self.evaluator.take())
         if self.phase != 1 and self.evaluator.due(self.env_steps):
-            self.evaluator.start(self.agent.online, self.env_steps, updates=self.agent.updates, version=self.version)
+            self.evaluator.start(self.agent.policy_net, self.env_steps, updates=self.agent.updates, version=self.version)
 
     def _log_eval(self, result: dict | None) -> None:
         if result is None:
@@ -502,6 +510,16 @@ class Learner:
             out.update({f"final/eval_{k}": self.last_eval.get(k)
                         for k in ("survival_rate", "achievement_rate", "return_mean")})
         return out
+
+
+def scheduled_lr(lr: float, lr_final: float, env_steps: int, budget: int) -> float:
+    """``lr`` at 0 env steps, ``lr_final`` at the budget and after it, linear in between.
+
+    >>> scheduled_lr(1e-3, 1e-4, 50, 100)
+    0.00055
+    """
+    frac = min(max(env_steps / budget, 0.0), 1.0) if budget > 0 else 1.0
+    return lr + frac * (lr_final - lr)
 
 
 def _read_int(path: Path) -> int:

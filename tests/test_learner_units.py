@@ -148,6 +148,62 @@ def test_reset_optimizer_syncs_target_and_is_deterministic():
     assert all(torch.equal(a.online.state_dict()[k], v) for k, v in a.target.state_dict().items())
 
 
+def _random_batch(rng: np.random.Generator, rows: int = 8) -> dict[str, np.ndarray]:
+    return _batch(rng.normal(size=(rows, 4)), rng.integers(0, 3, rows), rng.normal(size=rows),
+                  rng.normal(size=(rows, 4)), rng.integers(0, 2, rows))
+
+
+def test_weight_average_is_the_ema_of_the_online_weights_and_what_is_handed_out():
+    decay = 0.9
+    agent = DoubleDQN((4,), 3, _cfg(ema_decay=decay))
+    assert agent.policy_net is agent.averaged and agent.averaged is not agent.online
+    expected = {k: v.clone() for k, v in agent.online.state_dict().items()}  # the average starts at online
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        agent.update(_random_batch(rng))
+        for k, v in agent.online.state_dict().items():
+            expected[k] = decay * expected[k] + (1 - decay) * v
+    for k, v in agent.averaged.state_dict().items():
+        assert torch.allclose(v, expected[k], atol=1e-6), k
+    assert not all(torch.allclose(a, o) for a, o in zip(agent.averaged.parameters(), agent.online.parameters()))
+    obs = rng.normal(size=(6, 4)).astype(np.float32)
+    with torch.no_grad():
+        assert np.array_equal(agent.greedy(obs), agent.averaged(torch.from_numpy(obs)).argmax(1).numpy())
+    # A restarted learner goes on from the same average; a state saved without one restarts it at online.
+    restored = DoubleDQN((4,), 3, _cfg(ema_decay=decay))
+    restored.load_state_dict(agent.state_dict())
+    assert all(torch.equal(v, agent.averaged.state_dict()[k]) for k, v in restored.averaged.state_dict().items())
+    plain = DoubleDQN((4,), 3, _cfg())
+    assert plain.policy_net is plain.online and "averaged" not in plain.state_dict()
+    restored.load_state_dict(plain.state_dict())
+    assert all(torch.equal(v, plain.online.state_dict()[k]) for k, v in restored.averaged.state_dict().items())
+
+
+def test_learning_rate_follows_the_env_step_schedule():
+    from laneshift.learner.loop import scheduled_lr
+
+    assert scheduled_lr(1e-3, 1e-4, 0, 100) == pytest.approx(1e-3)
+    assert scheduled_lr(1e-3, 1e-4, 50, 100) == pytest.approx(5.5e-4)
+    assert scheduled_lr(1e-3, 1e-4, 100, 100) == pytest.approx(1e-4)
+    assert scheduled_lr(1e-3, 1e-4, 250, 100) == pytest.approx(1e-4)  # past the budget: stays at the end value
+    agent = DoubleDQN((4,), 3, _cfg(lr=1e-3))
+    agent.set_lr(2e-4)
+    assert agent.lr == pytest.approx(2e-4)
+    before = next(agent.online.parameters()).detach().clone()
+    agent.set_lr(0.0)
+    agent.update(_random_batch(np.random.default_rng(1)))
+    assert torch.equal(before, next(agent.online.parameters()))  # a zero step size moves nothing
+
+
+def test_schedule_and_average_options_are_checked():
+    from laneshift.config import ConfigError
+
+    with pytest.raises(ConfigError, match="learner.lr_final"):
+        LearnerConfig(lr=1e-4, lr_final=1e-3)
+    with pytest.raises(ConfigError, match="learner.ema_decay"):
+        LearnerConfig(ema_decay=1.0)
+
+
 # --------------------------------------------------------------------------- weights
 
 

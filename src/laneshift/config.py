@@ -252,6 +252,14 @@ class LearnerConfig:
     """Double DQN hyperparameters (all of them, CleanRL style) and the learner's cadence."""
 
     lr: float = 5e-4
+    # The learning rate at the end of the env-step budget: it falls linearly from ``lr`` as the run's
+    # env steps go from 0 to train.env_steps (pre-training keeps ``lr``). 0 = constant ``lr``.
+    # A decaying step size lets the last network settle instead of being one draw of the TD noise.
+    lr_final: float = 0.0
+    # Weight averaging: the network the run publishes, evaluates and checkpoints is an exponential
+    # moving average of the online network's weights, updated after every update with this decay
+    # (torch.optim.swa_utils; 0.999 averages over about the last 1,000 updates). 0 = off (online).
+    ema_decay: float = 0.0
     gamma: float = 0.99
     # n-step returns (DQfD, Rainbow): actors and the demo loader sum n rewards per item, the target
     # bootstraps with gamma^n. 1 = the paper's one-step Double DQN.
@@ -297,6 +305,9 @@ class LearnerConfig:
     def __post_init__(self) -> None:
         _check_choices(self, "learner")
         _check(self.lr > 0, "learner.lr", "must be > 0", self.lr)
+        _check(0.0 <= self.lr_final <= self.lr, "learner.lr_final", "must be in [0, learner.lr] (0 = constant lr)",
+               self.lr_final)
+        _check(0.0 <= self.ema_decay < 1.0, "learner.ema_decay", "must be in [0, 1) (0 = off)", self.ema_decay)
         _check(0.0 <= self.gamma <= 1.0, "learner.gamma", "must be in [0, 1]", self.gamma)
         _check(not isinstance(self.n_step, bool) and isinstance(self.n_step, int) and 1 <= self.n_step <= 255,
                "learner.n_step", "must be an int in [1, 255]", self.n_step)
