@@ -61,6 +61,10 @@ def evaluate_policy(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig
         raise ValueError(f"episodes must be >= 1, not {episodes}")
     env = make_env(env_cfg)
     policy = make_policy(env)
+    batch = getattr(policy, "batch", None)  # a network's policy (GreedyPolicy); scripted drivers have none
+    if batch is not None and getattr(env_cfg, "policy_vehicles", 0):
+        # The paper's third kind of vehicle: traffic driven by a copy of the model under test.
+        env.unwrapped.set_npc_policy(batch)
     returns, lengths, survived, achieved = [], [], 0, 0
     # How the lane-change episodes that crashed ended: "collision" or "offroad", by starting lane.
     crashes: dict[str, dict[str, int]] = {}
@@ -102,6 +106,18 @@ def evaluate_lanes(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig,
             for lane in lanes}
 
 
+class GreedyPolicy:
+    """A network's greedy policy: ``policy(obs) -> action`` for the ego vehicle, and ``batch`` (rows
+    of observations -> actions) for the policy vehicles of ``env.policy_vehicles``, which
+    :func:`evaluate_policy` drives with the same network (any policy with a ``batch`` does)."""
+
+    def __init__(self, batch: Callable[[np.ndarray], np.ndarray]):
+        self.batch = batch
+
+    def __call__(self, obs: np.ndarray) -> int:
+        return int(self.batch(np.asarray(obs)[None])[0])
+
+
 class CheckpointPolicy(NamedTuple):
     """A saved network as the actors run it, with what its metadata says about it."""
 
@@ -110,8 +126,8 @@ class CheckpointPolicy(NamedTuple):
     n_actions: int
     meta: dict[str, str]
 
-    def greedy(self) -> Policy:
-        return lambda obs: int(self.policy.greedy(np.asarray(obs)[None])[0])
+    def greedy(self) -> GreedyPolicy:
+        return GreedyPolicy(self.policy.greedy)
 
 
 def load_checkpoint_policy(checkpoint: str | Path) -> CheckpointPolicy:
@@ -132,7 +148,7 @@ def load_checkpoint_policy(checkpoint: str | Path) -> CheckpointPolicy:
     return CheckpointPolicy(policy, obs_shape, n_actions, meta)
 
 
-def load_greedy_policy(checkpoint: str | Path) -> Policy:
+def load_greedy_policy(checkpoint: str | Path) -> GreedyPolicy:
     return load_checkpoint_policy(checkpoint).greedy()
 
 

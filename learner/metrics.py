@@ -150,7 +150,7 @@ class GreedyEval:
 
     ``start`` copies the weights to CPU (the only work on the learner's thread); the thread builds
     its own network and hands its greedy policy to ``evaluate`` (which plays the builder's episodes:
-    the same episode seeds every time, the final summary's) and leaves the result for ``take``. One evaluation at a time: one due
+    the same validation episode seeds every time, ``train.validation_seed``) and leaves the result for ``take``. One evaluation at a time: one due
     while another still runs waits for the next check. ``close`` gives a running one a little time,
     then cancels it (at the policy's next step).
     """
@@ -204,14 +204,18 @@ class GreedyEval:
             net.requires_grad_(False)
             cancel = self._cancel
 
-            def greedy(obs: np.ndarray) -> int:
+            def batch(obs: np.ndarray) -> np.ndarray:
                 if cancel.is_set():
                     raise _Cancelled
                 x = np.asarray(obs)
                 x = x if x.dtype == np.uint8 else x.astype(np.float32, copy=False)
                 with torch.no_grad():
-                    return int(net(torch.as_tensor(x[None])).argmax(dim=1)[0])
+                    return net(torch.as_tensor(x)).argmax(dim=1).numpy()
 
+            def greedy(obs: np.ndarray) -> int:
+                return int(batch(np.asarray(obs)[None])[0])
+
+            greedy.batch = batch  # type: ignore[attr-defined]  # drives env.policy_vehicles (evaluate_policy)
             result = dict(self.evaluate(greedy))
         except _Cancelled:
             return

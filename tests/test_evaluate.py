@@ -89,3 +89,27 @@ def test_demo_agreement_counts_the_states_where_the_greedy_action_is_the_demonst
     assert out["states"] == len(shard.actions) == 60
     assert out["agreement"] == np.mean(shard.actions == 0)
     assert out["speed_agreement"] == np.mean(shard.actions // 3 == 0)
+
+
+def test_the_policy_vehicles_are_driven_by_the_network_under_evaluation(tmp_path):
+    """env.policy_vehicles: the paper's third kind of vehicle is a copy of the evaluated model."""
+    import torch
+
+    from laneshift.actors.envs import spec_of
+    from laneshift.qnet import build_q_network, save_checkpoint
+    from laneshift.studies.evaluate import load_greedy_policy
+
+    cfg = EnvConfig(scenario="straight", policy_vehicles=3, max_steps=5)
+    schema = spec_of(cfg).schema
+    torch.manual_seed(0)
+    net = build_q_network(schema.obs_shape, schema.n_actions, (8,))
+    path = save_checkpoint(net, tmp_path / "n.safetensors",
+                           {"obs_shape": ",".join(map(str, schema.obs_shape)), "n_actions": schema.n_actions,
+                            "hidden": "8", "dueling": 0})
+    greedy = load_greedy_policy(path)
+    rows_seen: list[int] = []
+    batch = greedy.batch
+    greedy.batch = lambda obs: (rows_seen.append(len(obs)), batch(obs))[1]
+    evaluate_policy(lambda env: greedy, cfg, episodes=1, seed=3)
+    assert rows_seen and max(rows_seen) > 1  # the ego's calls are one row; the traffic's are several
+    assert evaluate_policy(lambda env: greedy, EnvConfig(scenario="straight", max_steps=5), 1, seed=3)["episodes"] == 1
