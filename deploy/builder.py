@@ -113,13 +113,14 @@ class Builder:
 
     def greedy_evaluation(self):
         """The learner's ``EvaluatePolicy`` for ``train.eval_every`` (None when off): the run's env,
-        ``train.periodic_eval_episodes`` episodes on the final summary's episode seeds."""
+        ``train.periodic_eval_episodes`` episodes on validation episode seeds (``train.validation_seed``
+        on: the same episodes every time, in every seed's run, apart from the studies' test seeds)."""
         t = self.cfg.train
         if not t.eval_every:
             return None
         from laneshift.actors.evaluation import evaluate_policy
 
-        env_cfg, episodes, seed = self.cfg.env, t.periodic_eval_episodes, t.seed + 12345
+        env_cfg, episodes, seed = self.cfg.env, t.periodic_eval_episodes, t.validation_seed
         return lambda greedy: evaluate_policy(lambda env: greedy, env_cfg, episodes, seed=seed)
 
     def learner_links(self, session, stop: threading.Event):

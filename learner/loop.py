@@ -80,7 +80,7 @@ class Learner:
         # TensorBoard's step: the run's env steps, never decreasing (restored with the learner state).
         self.env_steps = 0
         t = cfg.train
-        # ``evaluate`` plays the env with the final summary's episode seeds (bound by the builder).
+        # ``evaluate`` plays the env on the validation episodes (train.validation_seed; bound by the builder).
         self.evaluator = GreedyEval(evaluate, t.eval_every, spec.schema.obs_shape, spec.schema.n_actions,
                                     cfg.learner.hidden, cfg.learner.dueling,
                                     cfg.learner.cnn) if t.eval_every and evaluate is not None else None

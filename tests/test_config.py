@@ -249,6 +249,14 @@ def test_demo_modes_without_paths_are_valid_config(mode):
     assert cfg.replay.demo_paths == ("runs/demos/x",)
 
 
+def test_validation_seed_below_zero_is_refused():
+    """train.validation_seed: the first episode seed of the greedy evaluation during training."""
+    assert TrainConfig().validation_seed == 200_000
+    msg = refused({"train.validation_seed": -1}, "train.validation_seed: ")
+    assert msg == "train.validation_seed: must be >= 0, got -1"
+    assert load_run_config(overrides={"train.validation_seed": "0"}).train.validation_seed == 0
+
+
 def test_min_size_above_capacity_named():
     msg = refused({"replay.capacity": 100, "replay.min_size": 101}, "replay.min_size: ")
     assert "replay.capacity (100)" in msg

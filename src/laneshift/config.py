@@ -372,6 +372,7 @@ class TrainConfig:
     # The end of the run evaluates once more if a multiple was passed since (waiting up to 10 s).
     eval_every: int = 0
     periodic_eval_episodes: int = 5  # greedy episodes per evaluation during training (train.eval_every)
+    validation_seed: int = 200_000  # its episode i is reset with seed validation_seed + i (studies test from 100,000)
     # MATLAB's stop criterion: end the run as soon as an episode's return reaches this (inf = never).
     stop_return: float = math.inf
     # Scripted episodes in the default demo shard (demo modes without replay.demo_paths);
@@ -389,6 +390,7 @@ class TrainConfig:
         _check(self.eval_every >= 0, "train.eval_every", "must be >= 0 (0 = off)", self.eval_every)
         _check(self.periodic_eval_episodes >= 1, "train.periodic_eval_episodes", "must be >= 1",
                self.periodic_eval_episodes)
+        _check(self.validation_seed >= 0, "train.validation_seed", "must be >= 0", self.validation_seed)
         _check(not math.isnan(self.stop_return), "train.stop_return", "must be a number (inf = never)",
                self.stop_return)
         _check(self.seed >= 0, "train.seed", "must be >= 0", self.seed)

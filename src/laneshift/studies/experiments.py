@@ -72,16 +72,19 @@ class _TrainLog(io.StringIO):
         return super().write(text)
 
 
-def train_logged(cfg: RunConfig, log_path: Path, label: str | None = None) -> None:
+def train_logged(cfg: RunConfig, log_path: Path, label: str | None = None, resume: bool = False) -> None:
     """One real local training run, its console output kept in ``log_path``; raises if it failed.
-    ``label``: show the run's env steps as a progress bar on stderr with this label."""
+    ``label``: show the run's env steps as a progress bar on stderr with this label. ``resume``:
+    continue the unfinished run in ``cfg``'s run dir (``laneshift train --resume``), its output
+    appended to the log."""
     from laneshift.deploy.local import train_local
 
     with progress(total=cfg.train.env_steps, desc=label or "", unit="step", leave=False,
                   disable=label is None) as bar:
         log = _TrainLog(bar)
-        rc = train_local(cfg, out=log)
-    log_path.write_text(log.getvalue())
+        rc = train_local(cfg, out=log, resume=resume)
+    with open(log_path, "a" if resume else "w") as f:
+        f.write(log.getvalue())
     if rc != 0:
         raise RuntimeError(f"training run {cfg.train.run_dir} failed (rc {rc}); see {log_path}")
 
@@ -486,11 +489,13 @@ def plot_curves(results: dict, out_dir: Path, window: int = 100, episodes: dict[
     return written + ([eval_plot] if eval_plot else [])
 
 
-def plot_eval_curves(results: dict, out_dir: Path, episodes: dict[str, dict]) -> Path | None:
-    """``curves_eval.png``: the periodic greedy evaluations (``train.eval_every``) of each method,
-    survival and achievement rate against env steps, mean over seeds with a 95 % bootstrap band over
-    seeds. This, not the training return (which mixes in exploration), says whether the greedy
-    policy has stopped improving. None when no run has two evaluations."""
+def plot_eval_curves(results: dict, out_dir: Path, episodes: dict[str, dict], filename: str = "curves_eval.png",
+                     what: str = "greedy evaluation during training") -> Path | None:
+    """``curves_eval.png`` (``filename``): the periodic greedy evaluations (``train.eval_every``) of
+    each method, survival and achievement rate against env steps, mean over seeds with a 95 %
+    bootstrap band over seeds. This, not the training return (which mixes in exploration), says
+    whether the greedy policy has stopped improving. ``what``: the title's name for them. None when
+    no run has two evaluations."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -521,11 +526,11 @@ def plot_eval_curves(results: dict, out_dir: Path, episodes: dict[str, dict]) ->
     for ax in axes:
         ax.set_ylim(-2, 102)
         ax.grid(alpha=0.3)
-    fig.suptitle(f"{results['scenario']}: greedy evaluation during training ({'/'.join(map(str, n))} episodes "
+    fig.suptitle(f"{results['scenario']}: {what} ({'/'.join(map(str, n))} episodes "
                  f"each, the same episode seeds every time)\nmean over seeds, 95 % bootstrap band over seeds",
                  fontsize=10)
     fig.tight_layout()
-    path = out_dir / "curves_eval.png"
+    path = out_dir / filename
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path

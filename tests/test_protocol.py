@@ -1,0 +1,132 @@
+"""The evaluation protocol end to end at a tiny budget: a real training run validated on the
+validation episodes, its final network tested, the baselines on the same test episodes, the table,
+the published network with its provenance, and a second invocation that skips the finished seed;
+and the validation-curve measures (time to a threshold, the largest drop) on hand-made curves.
+
+Room: tests, system (real Ray, zenoh or laneshift processes; the `system` marker). May import:
+laneshift (any floor), pytest, numpy, the standard library and what the code under test needs."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import time
+
+import pytest
+import yaml
+
+from laneshift.studies.protocol import (VALIDATION_SEED, eval_command, register, stability_drop,
+                                        time_to_threshold)
+
+TINY = ["--set", "replay.capacity=2000", "--set", "replay.min_size=200", "--set", "learner.hidden=32",
+        "--set", "learner.batch_size=32", "--set", "replay.spi_tolerance=1024",
+        "--set", "replay.demo_ratio=0.1", "--set", "learner.phase1_updates=100"]
+
+
+def _curve(points: list[tuple[int, float]]) -> list[dict]:
+    return [{"env_steps": s, "elapsed_s": s / 100, "survival_rate": 1.0, "achievement_rate": a} for s, a in points]
+
+
+def test_time_to_threshold_and_the_largest_drop_after_the_target_on_hand_made_curves():
+    curve = _curve([(100, 0.5), (200, 0.85), (300, 0.8), (400, 0.95), (500, 0.9), (600, 0.97), (700, 0.88)])
+    assert time_to_threshold(curve, 0.80) == {"env_steps": 200, "elapsed_s": 2.0}
+    assert time_to_threshold(curve, 0.95) == {"env_steps": 400, "elapsed_s": 4.0}  # >= counts
+    assert time_to_threshold(curve, 0.99) is None
+    assert time_to_threshold([], 0.8) is None
+    # From the first evaluation at or above 0.93 (0.95 at 400) on: best 0.95, then 0.97; 0.97 -> 0.88.
+    assert stability_drop(curve, 0.93) == pytest.approx(0.09)
+    # The dip before the target was reached (0.85 -> 0.8) does not count.
+    assert stability_drop(_curve([(1, 0.85), (2, 0.5), (3, 0.94), (4, 0.93)]), 0.93) == pytest.approx(0.01)
+    assert stability_drop(_curve([(1, 0.9), (2, 0.95), (3, 0.96), (4, 1.0)]), 0.93) == 0.0  # never fell
+    assert stability_drop(curve, 0.99) is None and stability_drop([], 0.5) is None
+
+
+def test_the_validation_figure_is_the_mean_over_seeds(tmp_path):
+    from laneshift.studies.protocol import plot_validation
+
+    runs = [{"seed": seed, "validation": {"curve": [{**r, "episodes": 20} for r in _curve(points)]}}
+            for seed, points in ((0, [(100, 0.5), (200, 0.9), (300, 0.95)]), (1, [(150, 0.2), (250, 0.7), (320, 0.9)]))]
+    results = {"road": "straight", "method": "dqfd-bc", "methods": {"dqfd-bc": {"runs": runs}},
+               "validation": {"episode_seed": VALIDATION_SEED}}
+    assert plot_validation(results, tmp_path).read_bytes()[:4] == b"\x89PNG"
+    runs[0]["validation"]["curve"] = runs[1]["validation"]["curve"] = runs[0]["validation"]["curve"][:1]
+    assert plot_validation(results, tmp_path / "none") is None  # one evaluation each: no curve
+
+
+def test_eval_command_names_every_env_field_eval_has_no_flag_for():
+    env = {"scenario": "straight", "observation": "vector", "reward_preset": 5, "max_steps": 0,
+           "initial_lane": "random", "action_set": "paper", "policy_vehicles": 3, "lane_features": False}
+    cmd = shlex.split(eval_command("ckpt dir/a.safetensors", env, 200, 300, "non-target"))
+    assert cmd[:4] == ["laneshift", "eval", "--checkpoint", "ckpt dir/a.safetensors"]
+    assert cmd[cmd.index("--seed") + 1] == "100000" and cmd[cmd.index("--initial-lane") + 1] == "non-target"
+    assert [cmd[i + 1] for i, a in enumerate(cmd) if a == "--set"] == ["env.policy_vehicles=3",
+                                                                       "env.lane_features=false"]
+    assert "--observation" not in cmd
+
+
+def test_protocol_trains_tests_publishes_and_skips_a_finished_seed(tmp_path, capsys):
+    from laneshift import cli
+
+    out, pub = tmp_path / "proto", tmp_path / "published"
+    argv = ["protocol", "--scenario", "straight", "--method", "dqfd", "--seeds", "0", "--env-steps", "2400",
+            "--test-episodes", "3", "--eval-max-steps", "40", "--validation-every", "400",
+            "--validation-episodes", "2", "--out", str(out), "--publish", str(pub), *TINY,
+            "--set", "train.log_every_s=0.25"]  # the learner starts a due evaluation at its status line
+    parser = argparse.ArgumentParser()
+    register(parser.add_subparsers())
+    args = parser.parse_args(argv)
+    assert args.func(args) == 0
+    results = json.loads((out / "results.json").read_text())
+    (run,) = results["methods"]["dqfd"]["runs"]
+    for lane in ("random", "non-target"):
+        assert run["eval"][lane]["episodes"] == 3
+        assert set(results["baselines"]) == {"scripted", "human-like stand-in"}
+        assert results["baselines"]["scripted"][lane]["survival"]["episodes"] == 3  # the same test episodes
+    table = (out / "table.md").read_text()
+    assert "scripted driver" in table and "human-like stand-in" in table and "| non-target |" in table
+    assert "80% validation achievement" in table and "largest drop after 93.0%" in table
+    # The periodic evaluation ran on the validation episodes.
+    cfg = yaml.safe_load((out / "dqfd-s0" / "config.yaml").read_text())
+    assert cfg["train"]["validation_seed"] == VALIDATION_SEED == 200_000 and cfg["train"]["eval_every"] == 400
+    curve = run["validation"]["curve"]
+    assert curve and all(r["episodes"] == 2 and r["elapsed_s"] >= 0 for r in curve)
+    # The figure needs two evaluations; how many fit in so short a run depends on the machine's load.
+    assert (out / "curves_validation.png").is_file() == (len(curve) >= 2)
+    assert run["validation"]["episode_seed"] == 200_000
+    # The published network, with its provenance and test table.
+    assert (pub / "straight-dqfd-seed0-final.safetensors").read_bytes() == \
+        (out / "dqfd-s0" / "checkpoints" / "final.safetensors").read_bytes()
+    doc = json.loads((pub / "straight-dqfd-seed0-final.json").read_text())
+    assert len(doc["git"]["revision"]) == 40 and isinstance(doc["git"]["dirty"], bool)
+    assert isinstance(doc["command"], str) and doc["config"]["train"]["validation_seed"] == 200_000
+    assert doc["test"]["episode_seed"] == 100_000 and doc["test"]["max_steps"] == 40
+    lane = doc["test"]["lanes"]["non-target"]
+    assert lane["episodes"] == 3 and lane["survival_rate"] == run["eval"]["non-target"]["survival_rate"]
+    # Its `laneshift eval` command gives the same rates.
+    capsys.readouterr()
+    assert cli.main(shlex.split(lane["command"])[1:] + ["--json"]) == 0
+    again = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert (again["survival_rate"], again["achievement_rate"]) == (lane["survival_rate"], lane["achievement_rate"])
+    # The same command again: the seed is done, the baselines are kept; nothing trains.
+    began = time.monotonic()
+    args = parser.parse_args(argv)
+    assert args.func(args) == 0
+    printed = capsys.readouterr().out
+    assert f"protocol: dqfd seed 0: done ({out / 'dqfd-s0.json'}), skipped" in printed
+    assert "baselines: kept from" in printed and time.monotonic() - began < 20
+    assert json.loads((out / "results.json").read_text())["methods"]["dqfd"]["runs"] == [run]
+    # Other test episodes in the same --out: refused before anything runs, naming the difference.
+    other = [("4" if a == "3" else a) for a in argv]
+    assert cli.main(["experiment", *other]) == 2
+    assert "is of another protocol (test" in capsys.readouterr().err
+
+
+def test_bad_input_fails_before_any_run(tmp_path, capsys):
+    from laneshift import cli
+
+    for argv, needle in ((["--method", "dqfq"], "--method: unknown 'dqfq'"), (["--seeds", "0,0"], "named twice"),
+                         (["--set", "learner.lr=fast"], "learner.lr"), (["--road", "a/b"], "--road")):
+        assert cli.main(["experiment", "protocol", "--out", str(tmp_path / "p"), *argv]) == 2
+        assert needle in capsys.readouterr().err
+    assert not (tmp_path / "p").exists()
