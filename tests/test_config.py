@@ -363,3 +363,14 @@ def test_saved_file_is_plain_yaml_with_one_section_per_component(tmp_path):
 def test_replace_and_to_dict():
     cfg = RunConfig().replace(train=TrainConfig(env_steps=5))
     assert cfg.train.env_steps == 5 and cfg.to_dict()["train"]["env_steps"] == 5
+
+
+def test_every_named_method_builds_a_valid_config():
+    from laneshift.config import METHODS, load_run_config, method_settings
+
+    for name in METHODS:
+        cfg = load_run_config(overrides=method_settings(name))
+        assert cfg.replay.demo_mode in ("none", "retention", "rehearsal", "dqfd"), name
+    anneal = load_run_config(overrides=method_settings("dqfd-bc-anneal"))
+    assert (anneal.learner.lr_final, anneal.learner.ema_decay, anneal.actor.epsilon_final) == (5e-5, 0.999, 0.01)
+    assert anneal.learner.bc_loss_weight == 1.0 and anneal.learner.n_step == 10  # dqfd-bc underneath

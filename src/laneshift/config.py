@@ -678,6 +678,11 @@ METHODS: dict[str, dict[str, Any]] = {
     # dqfd plus supervised imitation (cross-entropy on demo rows) and a dueling head: the two
     # changes that made the pre-trained network drive like the demonstrator (docs/RESULTS.md).
     "dqfd-bc": {**_DQFD, "learner.bc_loss_weight": 1.0, "learner.dueling": True},
+    # dqfd-bc whose last network settles instead of being one draw of the TD noise: the step size
+    # falls to a tenth over the budget, the network handed out is an average of the online weights
+    # (about the last 1,000 updates) and exploration ends at 1 % (docs/RESULTS.md, the ablation).
+    "dqfd-bc-anneal": {**_DQFD, "learner.bc_loss_weight": 1.0, "learner.dueling": True,
+                       "learner.lr_final": 5e-5, "learner.ema_decay": 0.999, "actor.epsilon_final": 0.01},
 }
 
 
