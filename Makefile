@@ -12,13 +12,16 @@ TRAIN_ARGS ?= --local --workers 2 --scenario straight --method dqfd-bc --env-ste
 
 venv: $(STAMP)
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
-	# Exactly torch 2.13.0 first: its CPU wheel is on disk; any other spec downloads GB of CUDA packages.
-	$(PY) -m pip install --disable-pip-version-check -q torch==2.13.0
-	# torch stays pinned in the same resolve: stable-baselines3 (the sb3 baseline) must not move it.
-	$(PY) -m pip install --disable-pip-version-check -q -e ".[test,baselines,cluster]" torch==2.13.0
-	@if $(PY) -m pip list 2>/dev/null | grep -i nvidia; then echo "error: CUDA packages were installed"; exit 1; fi
+	# torch 2.13.0 first, the build this machine should have (deploy/install_torch.py, which says which
+	# and why): the CUDA build where nvidia-smi lists a GPU, else the CPU build from PyTorch's CPU
+	# index (or, where that index cannot be reached, pip's own index if it brings no nvidia-* packages).
+	$(PY) deploy/install_torch.py -q -c constraints.txt
+	# The package and its extras at the tested versions (constraints.txt pins torch too: it stays).
+	$(PY) -m pip install --disable-pip-version-check -q -e ".[train,test,baselines,cluster]" -c constraints.txt
+	# Where the CPU build was chosen: no nvidia-* package may have come in.
+	@$(PY) deploy/install_torch.py --check
 	@touch $(STAMP)
 
 train: $(STAMP)
@@ -45,14 +48,15 @@ RLLIB_ARGS ?=
 
 $(RLLIB_STAMP): pyproject.toml
 	$(PYTHON) -m venv $(RLLIB_VENV)
-	# Exactly torch 2.13.0 first (CPU wheel on disk), then RLlib with torch pinned in the same resolve.
-	$(RLLIB_PY) -m pip install --disable-pip-version-check -q torch==2.13.0
+	# torch 2.13.0 first, by the same rule as .venv (deploy/install_torch.py), then RLlib with torch
+	# pinned in the same resolve.
+	$(RLLIB_PY) deploy/install_torch.py -q
 	$(RLLIB_PY) -m pip install --disable-pip-version-check -q "ray[rllib]==2.60.0" torch==2.13.0
 	# The env's own deps under RLlib's gymnasium 1.2.2 (highway-env accepts >=1.0; it brings pygame-ce),
 	# then laneshift itself without its deps (no zenoh, no gymnasium 1.4.0).
 	$(RLLIB_PY) -m pip install --disable-pip-version-check -q highway-env==1.12.1 gymnasium==1.2.2 torch==2.13.0
 	$(RLLIB_PY) -m pip install --disable-pip-version-check -q --no-deps -e .
-	@if $(RLLIB_PY) -m pip list 2>/dev/null | grep -i nvidia; then echo "error: CUDA packages were installed"; exit 1; fi
+	@$(RLLIB_PY) deploy/install_torch.py --check
 	@touch $(RLLIB_STAMP)
 
 bench-rllib: $(RLLIB_STAMP)

@@ -1,7 +1,8 @@
 """``deploy/ray-cluster.yaml``, the ``ray up`` config: Ray 2.60's own config code accepts it, and its
-commands do what the file says (token auth, torch's CPU wheel, the autoscaler, laneshift's custom
-resources). The commands run here in bash against stand-ins for ``ray`` and ``pip`` that only record
-what they got, so no Ray is started and nothing is installed.
+commands do what the file says (token auth, torch by deploy/install_torch.py, the autoscaler,
+laneshift's custom resources). The commands run here in bash against stand-ins for ``ray``, ``pip``
+and the venv's ``python`` that only record what they got, or with the install script's --dry-run,
+so no Ray is started and nothing is installed.
 
 Room: tests, system (real Ray, zenoh or laneshift processes; the `system` marker). May import:
 laneshift (any floor), pytest, numpy, the standard library and what the code under test needs."""
@@ -11,6 +12,8 @@ from __future__ import annotations
 import json
 import os
 import shlex
+import shutil
+import socket
 import stat
 import subprocess
 import sys
@@ -25,7 +28,7 @@ pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "deploy" / "ray-cluster.yaml"
-CPU_INDEX = "https://download.pytorch.org/whl/cpu"
+INSTALL_TORCH = "~/laneshift-install_torch.py"  # deploy/install_torch.py on every node (file_mounts)
 
 
 @pytest.fixture(scope="module")
@@ -140,16 +143,38 @@ def test_every_node_gets_the_token_and_token_mode(raw, tmp_path):
     assert stat.S_IMODE(token.stat().st_mode) == 0o600
 
 
-def test_torch_comes_from_the_cpu_index_before_laneshift(raw):
+def _with_install_script(raw: dict, home: Path) -> None:
+    """What ray up's file_mounts put on a node: the install rule and the tested versions."""
+    mounts = raw["file_mounts"]
+    assert mounts[INSTALL_TORCH] == "deploy/install_torch.py"
+    assert mounts["~/laneshift-constraints.txt"] == "constraints.txt"
+    shutil.copy(ROOT / mounts[INSTALL_TORCH], home / INSTALL_TORCH.removeprefix("~/"))
+
+
+def _closed_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_torch_comes_by_the_install_rule_before_laneshift(raw, tmp_path):
     setup = raw["setup_commands"]
-    torch_i = next(i for i, c in enumerate(setup) if "pip install torch" in c)
-    argv = shlex.split(setup[torch_i])
-    assert argv[argv.index("--index-url") + 1] == CPU_INDEX
-    assert "torch==2.13.0" in argv
+    torch_i = next(i for i, c in enumerate(setup) if INSTALL_TORCH in c and "--check" not in c)
     laneshift_i = next(i for i, c in enumerate(setup) if "laneshift[cluster]" in c)
     assert laneshift_i > torch_i
-    # laneshift's own install keeps the same torch pinned, so pip keeps the CPU wheel.
-    assert "torch==2.13.0" in shlex.split(setup[laneshift_i])
+    # laneshift's own install keeps the same torch pinned, at the tested versions, so pip keeps the build.
+    argv = shlex.split(setup[laneshift_i])
+    assert "torch==2.13.0" in argv and argv[argv.index("-c") + 1] == "~/laneshift-constraints.txt"
+    # The rule itself is tests/test_install_rule.py's; here: it runs in ray up's shell, into the node's venv.
+    _with_install_script(raw, tmp_path)
+    venv_python = tmp_path / "laneshift-venv" / "bin" / "python"
+    gpu = _run_like_ray_up(setup[torch_i] + " --dry-run", tmp_path, env={"LANESHIFT_TORCH": "cuda"})
+    assert gpu.returncode == 0, gpu.stderr
+    assert "CUDA build" in gpu.stdout and f"+ {venv_python} -m pip install torch==2.13.0" in gpu.stdout
+    no_index = {"LANESHIFT_TORCH": "cpu", "TORCH_INDEX": f"http://127.0.0.1:{_closed_port()}/whl/cpu"}
+    cpu = _run_like_ray_up(setup[torch_i] + " --dry-run", tmp_path, env=no_index)
+    assert cpu.returncode == 0, cpu.stderr
+    assert "cannot be reached" in cpu.stdout and f"{tmp_path}/laneshift-constraints.txt" in cpu.stdout
 
 
 def test_laneshift_wheel_is_the_projects_version(raw):
@@ -162,9 +187,16 @@ def test_laneshift_wheel_is_the_projects_version(raw):
     assert raw["file_mounts"]["~/laneshift-wheels"] == ".whl"
 
 
-@pytest.mark.parametrize("listing, ok", [("torch 2.13.0+cpu\nray 2.60.0\n", True),
-                                          ("torch 2.13.0\nnvidia-cublas-cu12 12.8.4.1\n", False)])
-def test_setup_fails_when_cuda_packages_came_in(raw, tmp_path, listing, ok):
-    check = next(c for c in raw["setup_commands"] if "nvidia" in c)
-    _stand_in(tmp_path, "pip", f"assert sys.argv[1:] == ['list'], sys.argv\nprint({listing!r}, end='')")
-    assert (_run_like_ray_up(check, tmp_path).returncode == 0) is ok
+CPU_LISTING = [{"name": "torch", "version": "2.13.0+cpu"}, {"name": "ray", "version": "2.60.0"}]
+CUDA_LISTING = [{"name": "torch", "version": "2.13.0"}, {"name": "nvidia-cublas-cu12", "version": "12.8.4.1"}]
+
+
+@pytest.mark.parametrize("build, listing, ok", [("cpu", CPU_LISTING, True), ("cpu", CUDA_LISTING, False),
+                                                 ("cuda", CUDA_LISTING, True)])
+def test_setup_fails_when_cuda_packages_came_into_a_cpu_node(raw, tmp_path, build, listing, ok):
+    check = next(c for c in raw["setup_commands"] if INSTALL_TORCH in c and "--check" in c)
+    _with_install_script(raw, tmp_path)
+    _stand_in(tmp_path, "python", f"assert sys.argv[1:4] == ['-m', 'pip', 'list'], sys.argv\nprint({json.dumps(listing)!r})")
+    proc = _run_like_ray_up(check, tmp_path, env={"LANESHIFT_TORCH": build})
+    assert (proc.returncode == 0) is ok, proc.stderr
+    assert ok or "CUDA packages were installed" in proc.stderr

@@ -483,8 +483,19 @@ def _zenoh_message(exc: BaseException) -> str:
     return re.sub(r" at /\S+?:\d+\.?", "", str(exc)).strip()
 
 
+#: What the `laneshift` command needs beyond the environments (pyproject's `train` extra).
+TRAIN_EXTRA_MODULES = ("tqdm", "zenoh", "torch", "ray")
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser(sys.argv[1:] if argv is None else argv)
+    try:
+        parser = build_parser(sys.argv[1:] if argv is None else argv)
+    except ModuleNotFoundError as exc:  # a core-only install: the environments, not the command
+        if exc.name not in TRAIN_EXTRA_MODULES:
+            raise
+        print(f"laneshift: {exc.name} is not installed: the laneshift command needs the train extra "
+              f"(pip install 'laneshift[train]', torch first: python deploy/install_torch.py)", file=sys.stderr)
+        return 2
     args = parser.parse_args(argv)
     prog = getattr(args, "cli_prog", "laneshift")
     try:
