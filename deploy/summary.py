@@ -50,7 +50,8 @@ def summarise(run: Run, why: str, wall: float, out: TextIO) -> dict:
         f"replay          {replay.get('tables', {}).get('online', {}).get('inserted', '-')} items stored, "
         f"{lost_batches} batches ({lost_items} items) lost and counted",
         f"restarts        " + (", ".join(f"{k} {v}" for k, v in run.deaths.items()) or "none"),
-        f"learner         {last.get('updates', 0):,} updates, final weights version {last.get('version', 0)}",
+        f"learner         {last.get('updates', 0):,} updates, final weights version {last.get('version', 0)}"
+        + _updates_lost_text(last.get("restored_from")),
         *waits_line(cfg, waits),
         *([f"stopped early   episode {last['stop_reason']['episode']} returned {last['stop_reason']['return']:.3f}"
            f" >= train.stop_return {cfg.train.stop_return} after {last['stop_reason']['elapsed_s']} s"]
@@ -74,6 +75,16 @@ def summarise(run: Run, why: str, wall: float, out: TextIO) -> dict:
     lines += [f"run dir         {run_dir}", f"checkpoint      {final}", f"tensorboard     {_tensorboard_command()} --logdir {run_dir / 'tb'}"]
     print("\n".join(lines), file=out, flush=True)
     return result
+
+
+def _updates_lost_text(restored_from: dict | None) -> str:
+    """What a learner restart cost, for the learner's line: the updates it had published and could
+    not restore (all of them when it died before its first state save)."""
+    lost = int((restored_from or {}).get("updates_lost") or 0)
+    if not lost:
+        return ""
+    how = "without a state checkpoint" if restored_from.get("path") is None else "from its last state checkpoint"
+    return f" (restarted {how}: {lost:,} updates lost)"
 
 
 def wait_shares(summaries: list[dict], last: dict) -> dict[str, float]:

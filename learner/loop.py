@@ -122,20 +122,32 @@ class Learner:
         """A restarted (or resumed) learner goes on from its last full state.
 
         The weights version continues above every version this run ever published (the
-        ``published_version`` file is written on each broadcast), so actors, which ignore versions
-        they already passed, take the new weights at once and versions never go backwards.
+        ``published_version`` file, written before each broadcast, holds it and the update count it
+        was published at), so actors, which ignore versions they already passed, take the new
+        weights at once and versions never go backwards: also when the learner died before its
+        first state save, when it starts from its initial network. ``updates_lost``: the updates
+        published and not in the restored state (all of them without one), reported in the
+        status and the run's summary.
         """
+        published, published_updates = _read_published(self.version_path)
         if not self.state_path.exists():
-            return None
+            if published < 0:
+                return None  # a new run
+            self.version = published + 1
+            info = {"updates": 0, "version": self.version, "phase": self.phase, "path": None,
+                    "updates_lost": published_updates}
+            print(f"learner: no training state to restore (the learner stopped before its first state save); "
+                  f"starting over from the initial network at weights version {self.version}, "
+                  f"{published_updates} updates lost", flush=True)
+            return info
         state = torch.load(self.state_path, map_location=self.agent.device, weights_only=True)
         self.agent.load_state_dict(state["agent"])
-        published = _read_int(self.version_path)
         self.version = max(int(state["version"]), published) + 1
         self.phase = int(state["phase"])
         self.episodes = int(state["episodes"])
         self.env_steps = int(state.get("env_steps", 0))  # absent in states written before it was kept
         info = {"updates": self.agent.updates, "version": self.version, "phase": self.phase,
-                "path": str(self.state_path)}
+                "path": str(self.state_path), "updates_lost": max(0, published_updates - self.agent.updates)}
         print(f"learner: restored {self.state_path} (update {self.agent.updates}, phase {self.phase}); "
               f"continuing at weights version {self.version}", flush=True)
         return info
@@ -169,7 +181,7 @@ class Learner:
 
     def publish(self) -> None:
         try:  # before the broadcast: a restarted learner must never reuse a version actors saw
-            _write_int(self.version_path, self.version)
+            _write_published(self.version_path, self.version, self.agent.updates)
         except OSError as exc:
             self._checkpoint_failed("published version", exc)
         self.links.publish_weights(to_wire(self.agent.policy_net, self.version, self.phase, self.agent.updates))
@@ -522,17 +534,22 @@ def scheduled_lr(lr: float, lr_final: float, env_steps: int, budget: int) -> flo
     return lr + frac * (lr_final - lr)
 
 
-def _read_int(path: Path) -> int:
+def _read_published(path: Path) -> tuple[int, int]:
+    """(the highest weights version published, the update count it was published at); (-1, 0) if
+    none was. A file of one number (written before the update count was kept) gives 0 updates."""
     try:
-        return int(path.read_text().strip())
+        fields = [int(x) for x in path.read_text().split()]
     except (OSError, ValueError):
-        return -1
+        return -1, 0
+    if not fields:
+        return -1, 0
+    return fields[0], fields[1] if len(fields) > 1 else 0
 
 
-def _write_int(path: Path, value: int) -> None:
+def _write_published(path: Path, version: int, updates: int) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".tmp")
-    tmp.write_text(str(value))
+    tmp.write_text(f"{version} {updates}")
     tmp.replace(path)
 
 

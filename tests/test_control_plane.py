@@ -190,10 +190,42 @@ def test_a_restarted_learner_resumes_its_state_above_every_published_version(tmp
     first.version = 9  # published after the state was saved: a restart must not reuse 4..9
     first.publish()
     second = Learner(cfg, spec, _NoLinks(), threading.Event())
-    assert second.restored_from == {"updates": 5, "version": 10, "phase": 0, "path": str(second.state_path)}
+    assert second.restored_from == {"updates": 5, "version": 10, "phase": 0, "path": str(second.state_path),
+                                    "updates_lost": 0}
     for a, b in zip(first.agent.optimizer.state_dict()["state"].values(),
                     second.agent.optimizer.state_dict()["state"].values()):
         assert torch_equal(a["exp_avg"], b["exp_avg"])
+
+
+def test_a_learner_restarted_before_its_first_state_save_publishes_above_every_version_and_counts_its_loss(tmp_path):
+    from laneshift.actors.envs import spec_of
+    from laneshift.deploy.summary import _updates_lost_text
+    from laneshift.learner.loop import Learner
+
+    cfg = load_run_config(overrides={"env.scenario": "lka", "train.run_dir": str(tmp_path), "learner.hidden": "16"})
+    spec = spec_of(cfg.env)
+    assert Learner(cfg, spec, _NoLinks(), threading.Event()).restored_from is None  # a new run
+    links = _NoLinks()
+    first = Learner(cfg, spec, links, threading.Event())
+    batch = {"obs": np.zeros((8, *spec.schema.obs_shape), np.float32), "action": np.zeros(8, np.int64),
+             "reward": np.ones(8, np.float32), "next_obs": np.zeros((8, *spec.schema.obs_shape), np.float32),
+             "terminated": np.zeros(8, np.uint8), "steps": np.ones(8, np.uint8)}
+    for version in range(1, 8):  # 7 versions published, 3 updates each, and never a state save
+        for _ in range(3):
+            first.agent.update(batch)
+        first.version = version
+        first.publish()
+    assert not first.state_path.exists()
+    second_links = _NoLinks()
+    second = Learner(cfg, spec, second_links, threading.Event())
+    assert second.restored_from == {"updates": 0, "version": 8, "phase": 0, "path": None, "updates_lost": 21}
+    second.publish()
+    assert second_links.versions == [8] and max(links.versions) == 7  # strictly above what actors saw
+    assert _updates_lost_text(second.restored_from) == " (restarted without a state checkpoint: 21 updates lost)"
+    assert _updates_lost_text(None) == ""
+    # A file from before the update count was kept: the version alone still holds.
+    second.version_path.write_text("41")
+    assert Learner(cfg, spec, _NoLinks(), threading.Event()).restored_from["version"] == 42
 
 
 def torch_equal(a, b) -> bool:
