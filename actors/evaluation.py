@@ -2,7 +2,9 @@
 intervals (paper, Table 2), and the crashes by kind and starting lane. The loop every evaluation
 runs: the learner's periodic greedy evaluation (handed to it by the builder), the launcher's final
 summary, ``laneshift eval``, the studies and the baselines; and a saved checkpoint as the actors
-run it (``load_checkpoint_policy``, ``evaluate_checkpoint``).
+run it (``load_checkpoint_policy``, ``evaluate_checkpoint``), and what its metadata says about the
+env it was trained on (``checkpoint_env_settings``). A ``Recorder`` handed to the loop sees the
+first episodes drawn by the env's ``render()`` (``laneshift eval --video``).
 
 Survival: the episode ends without a collision or leaving the road. Achievement: the agent is
 in the target lane at the last step (so a crash is never an achievement).
@@ -19,12 +21,13 @@ from __future__ import annotations
 import dataclasses
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable, NamedTuple
+from typing import TYPE_CHECKING, Callable, Mapping, NamedTuple, Protocol
 
 import gymnasium as gym
 import numpy as np
 
 from laneshift.config import EnvConfig
+from laneshift.envspec import SCENARIOS
 from laneshift.progress import progress as progress_bar
 
 from .envs import make as make_env
@@ -51,15 +54,31 @@ Policy = Callable[[np.ndarray], int]
 INITIAL_LANES = ("random", "non-target")
 
 
+class Recorder(Protocol):
+    """What :func:`evaluate_policy` shows the first ``episodes`` episodes it plays (the env is made
+    with ``render_mode="rgb_array"`` then, so ``env.render()`` draws the top-down view)."""
+
+    episodes: int
+
+    def frame(self, episode: int, step: int, env: gym.Env, last: bool) -> None:
+        """After the reset (step 0) and after every step (``last``: the episode's final one)."""
+
+    def episode_end(self, episode: int, seed: int, steps: int, outcome: dict) -> None:
+        """The episode is over: its reset seed, length and ``outcome`` (start_lane, survived,
+        on_target_lane, return)."""
+
+
 def evaluate_policy(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig, episodes: int,
-                    seed: int = 0, progress: str | None = None) -> dict:
+                    seed: int = 0, progress: str | None = None, recorder: Recorder | None = None) -> dict:
     """``make_policy(env)`` returns the policy (obs -> action) to evaluate on that env; scripted
     drivers read the env's state, a network ignores it: ``lambda env: greedy``.
 
-    ``progress``: the label of a progress bar on stderr (:mod:`laneshift.progress`); None: quiet."""
+    ``progress``: the label of a progress bar on stderr (:mod:`laneshift.progress`); None: quiet.
+    ``recorder``: shown the first ``recorder.episodes`` of these very episodes (same seeds, same
+    actions: drawing reads the state, changes nothing); None: no env draws anything it need not."""
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, not {episodes}")
-    env = make_env(env_cfg)
+    env = make_env(env_cfg) if recorder is None else make_env(env_cfg, render_mode="rgb_array")
     policy = make_policy(env)
     batch = getattr(policy, "batch", None)  # a network's policy (GreedyPolicy); scripted drivers have none
     if batch is not None and getattr(env_cfg, "policy_vehicles", 0):
@@ -74,14 +93,23 @@ def evaluate_policy(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig
             obs, info = env.reset(seed=seed + ep)
             start_lane = info.get("lane_index")
             total, steps, done = 0.0, 0, False
+            recording = recorder is not None and ep < recorder.episodes
+            if recording:
+                recorder.frame(ep, 0, env, False)  # type: ignore[union-attr]
             while not done:
                 obs, reward, terminated, truncated, info = env.step(int(policy(obs)))
                 total += float(reward)
                 steps += 1
                 done = terminated or truncated
+                if recording:
+                    recorder.frame(ep, steps, env, done)  # type: ignore[union-attr]
             crashed = bool(info.get("crashed", terminated))  # LKA: terminated = left the lane
             survived += not crashed
             achieved += (not crashed) and bool(info.get("on_target_lane", False))
+            if recording:
+                recorder.episode_end(ep, seed + ep, steps, {  # type: ignore[union-attr]
+                    "start_lane": start_lane, "survived": not crashed,
+                    "on_target_lane": bool(info.get("on_target_lane", False)), "return": total})
             if crashed and start_lane is not None:
                 kind = crashes.setdefault("offroad" if info.get("offroad") else "collision", {})
                 kind[f"start lane {start_lane}"] = kind.get(f"start lane {start_lane}", 0) + 1
@@ -152,18 +180,53 @@ def load_greedy_policy(checkpoint: str | Path) -> GreedyPolicy:
     return load_checkpoint_policy(checkpoint).greedy()
 
 
+def checkpoint_env_settings(meta: Mapping[str, str]) -> dict[str, str]:
+    """The env a checkpoint was trained on, as far as its metadata tells, as EnvConfig fields:
+    ``observation`` (stacked frames, a 3-d uint8 ``obs_shape``: grayscale; a 1-d one: vector) and
+    ``scenario`` (its ``env_id``, when it is one of the scenarios). Whatever it does not tell is
+    left out; the vector's layout (its length) is not an EnvConfig choice made here.
+
+    >>> checkpoint_env_settings({"obs_shape": "4,100,100", "obs_dtype": "|u1",
+    ...                          "env_id": "laneshift/MergeLaneChange-v0"})
+    {'observation': 'grayscale', 'scenario': 'merge'}
+    >>> checkpoint_env_settings({"obs_shape": "82"})
+    {'observation': 'vector'}
+    """
+    out: dict[str, str] = {}
+    dims = [d for d in str(meta.get("obs_shape", "")).split(",") if d.strip()]
+    if len(dims) == 3 or meta.get("obs_dtype") == "|u1":
+        out["observation"] = "grayscale"
+    elif len(dims) == 1:
+        out["observation"] = "vector"
+    scenario = {env_id: name for name, env_id in SCENARIOS.items()}.get(str(meta.get("env_id", "")))
+    if scenario is not None:
+        out["scenario"] = scenario
+    return out
+
+
+def _shape_hint(trained: tuple[int, ...], given: tuple[int, ...]) -> str:
+    if trained == (67,):
+        return " (the 67-float vector layout is env.lane_features=false)"
+    if len(trained) != len(given):  # frames against a vector, or the other way round
+        kind = "grayscale" if len(trained) == 3 else "vector"
+        return (f" (a {kind} checkpoint: env.observation={kind}, which `laneshift eval` takes from the checkpoint "
+                f"when no --observation, --set or --config file sets it)")
+    return ""
+
+
 def evaluate_checkpoint(checkpoint: str | Path, env_cfg: EnvConfig, episodes: int, seed: int = 0,
-                        progress: str | None = None) -> dict:
+                        progress: str | None = None, recorder: Recorder | None = None) -> dict:
+    """:func:`evaluate_policy` of a checkpoint's greedy policy; ValueError (saying what fits) when
+    it was trained on observations of another shape than ``env_cfg``'s env gives."""
     from .envs import spec_of
 
     ckpt = load_checkpoint_policy(checkpoint)
     expected = tuple(spec_of(env_cfg).schema.obs_shape)
     if ckpt.obs_shape != expected:
-        hint = " (the 67-float vector layout is env.lane_features=false)" if ckpt.obs_shape == (67,) else ""
         raise ValueError(f"checkpoint {checkpoint} was trained on observations of shape {ckpt.obs_shape}, "
-                         f"the env gives {expected}{hint}")
+                         f"the env gives {expected}{_shape_hint(ckpt.obs_shape, expected)}")
     greedy = ckpt.greedy()
-    return evaluate_policy(lambda env: greedy, env_cfg, episodes, seed, progress=progress)
+    return evaluate_policy(lambda env: greedy, env_cfg, episodes, seed, progress=progress, recorder=recorder)
 
 
 def format_result(r: dict) -> str:
@@ -178,6 +241,15 @@ def format_result(r: dict) -> str:
                     if "speed_agreement" in agree else ""))
     for kind, by_lane in sorted(r.get("crashes", {}).items()):
         text += f"\n  {kind}: {sum(by_lane.values())} ({', '.join(f'{k}: {v}' for k, v in sorted(by_lane.items()))})"
+    video = r.get("video")
+    if video:
+        for ep in video["episodes"]:
+            ending = ("crashed" if not ep["survived"] else
+                      "reached the target lane" if ep["on_target_lane"] else "survived off the target lane")
+            start = "" if ep.get("start_lane") is None else f" from lane {ep['start_lane']}"
+            text += f"\n  video episode {ep['episode']} (seed {ep['seed']}): {ep['steps']} steps{start}, {ending}"
+        text += (f"\nvideo: {video['path']} ({video['frames']} frames at {video['fps']:g} fps, "
+                 f"{video['bytes'] / 1e6:.2f} MB)")
     resp = r.get("lka_response")
     if resp:
         fmt = lambda v: "never" if v is None else f"{v:.1f} s"  # noqa: E731

@@ -296,13 +296,27 @@ def _add_services(sub: argparse._SubParsersAction) -> None:
 
 
 def _eval(args: argparse.Namespace) -> int:
+    import dataclasses
+
     from laneshift.studies.evaluate import evaluate_checkpoint, format_result
 
     cfg = _config_from(args, {"env.scenario": args.scenario, "env.initial_lane": args.initial_lane,
                               "env.max_steps": args.max_steps, "env.observation": args.observation})
     try:
-        result = evaluate_checkpoint(args.checkpoint, cfg.env, episodes=args.episodes, seed=args.seed,
-                                     progress="eval")
+        picked = _eval_env_from_checkpoint(args, cfg)
+        env_cfg = dataclasses.replace(cfg.env, **picked)
+        recorder = None
+        if args.video:
+            if env_cfg.is_lka:
+                raise ValueError(f"--video: the {env_cfg.scenario} env draws no top-down view to record")
+            from laneshift.studies.video import GifRecorder
+
+            recorder = GifRecorder(args.video, episodes=min(args.video_episodes, args.episodes),
+                                   fps=args.video_fps, scale=args.video_scale)
+        result = evaluate_checkpoint(args.checkpoint, env_cfg, episodes=args.episodes, seed=args.seed,
+                                     progress="eval", recorder=recorder)
+        if recorder is not None:
+            result["video"] = recorder.write()
         if args.demo_agreement:
             from laneshift.studies.evaluate import demo_agreement
 
@@ -310,7 +324,10 @@ def _eval(args: argparse.Namespace) -> int:
     except (ValueError, OSError) as exc:  # a checkpoint of another env or layout, or no such file
         print(f"laneshift eval: {exc}", file=sys.stderr)
         return 2
-    if cfg.env.is_lka:
+    if picked:  # after the checks: a refusal stays one line
+        print("laneshift eval: from the checkpoint: " + ", ".join(f"{k} {v}" for k, v in picked.items()),
+              file=sys.stderr)
+    if env_cfg.is_lka:
         from laneshift.studies.evaluate import load_greedy_policy, lka_response, plot_lka_response
 
         greedy = load_greedy_policy(args.checkpoint)
@@ -319,6 +336,34 @@ def _eval(args: argparse.Namespace) -> int:
         result["lka_response"] = {k: v for k, v in resp.items() if k != "trace"} | {"png": str(png)}
     print(json.dumps(result) if args.json else format_result(result))
     return 0
+
+
+def _eval_env_from_checkpoint(args: argparse.Namespace, cfg: RunConfig) -> dict[str, str]:
+    """The env settings ``laneshift eval`` takes from the checkpoint's metadata (its observation
+    type and scenario) where the user chose none: not by a flag, ``--set`` or the ``--config``
+    file; only those that differ from the config's. An explicit choice that contradicts the
+    checkpoint is kept, and refused by the evaluation with what would fit."""
+    from laneshift.actors.evaluation import checkpoint_env_settings
+    from laneshift.config import read_config_file
+    from laneshift.wire import safetensors_loads
+
+    chosen = {name for name in ("scenario", "observation") if getattr(args, name) is not None}
+    chosen |= {key.removeprefix("env.") for key in parse_set(args.set) if key.startswith("env.")}
+    if args.config:
+        chosen |= set(read_config_file(args.config).get("env", {}))
+    _, meta = safetensors_loads(Path(args.checkpoint).read_bytes())
+    return {name: value for name, value in checkpoint_env_settings(meta).items()
+            if name not in chosen and getattr(cfg.env, name) != value}
+
+
+def video_path(text: str) -> str:
+    """argparse type: a path ``--video`` can write (a .gif)."""
+    from laneshift.studies.video import check_video_path
+
+    try:
+        return str(check_video_path(text))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _replay_inspect(args: argparse.Namespace) -> int:
@@ -341,14 +386,24 @@ def _add_inspection(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("eval", help="greedy evaluation of a checkpoint (survival / achievement rates)")
     p.add_argument("--checkpoint", required=True, help="a learner checkpoint (.safetensors), e.g. "
                                                        "RUN_DIR/checkpoints/final.safetensors")
-    p.add_argument("--scenario", help="straight | merge | curve | roundabout | lka (default: the config's)")
+    p.add_argument("--scenario", help="straight | merge | curve | roundabout | lka (default: the checkpoint's env, "
+                                      "else the config's)")
     p.add_argument("--episodes", type=positive_int, default=100, help="greedy evaluation episodes")
     p.add_argument("--initial-lane", choices=["random", "non-target"],
                    help="where episodes start: any lane, or never the target lane (default: the config's)")
     p.add_argument("--max-steps", type=positive_int, help="episode length (paper evaluation: 300)")
     p.add_argument("--observation", choices=["vector", "grayscale"],
-                   help="observation type; must be the one the checkpoint was trained on")
+                   help="observation type; must be the one the checkpoint was trained on (default: the checkpoint's)")
     p.add_argument("--seed", type=non_negative_int, default=0, help="episode i is reset with seed SEED+i")
+    p.add_argument("--video", type=video_path, metavar="PATH.gif",
+                   help="also write the first --video-episodes episodes as an animated GIF (the top-down view)")
+    p.add_argument("--video-episodes", type=positive_int, default=1, metavar="N",
+                   help="how many episodes --video shows")
+    p.add_argument("--video-fps", type=positive_float, metavar="FPS",
+                   help="--video frames per second of real time; fewer than the policy frequency keeps every "
+                        "k-th step (default: every step, 10 on the lane-change roads)")
+    p.add_argument("--video-scale", type=fraction, default=1.0, metavar="FACTOR",
+                   help="--video image size factor (1: 600 x 300 pixels)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     p.add_argument("--png", help="LKA: where to write the response plot (default: next to the checkpoint)")
     p.add_argument("--demo-agreement", metavar="SHARD",
