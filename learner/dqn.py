@@ -259,6 +259,14 @@ class DoubleDQN:
         not_done = 1.0 - torch.as_tensor(terminated, dtype=torch.float32, device=dev)
         return torch.pow(self.cfg.gamma, torch.as_tensor(steps, dtype=torch.float32, device=dev)) * not_done
 
+    def _terminal_value(self, steps: Any, terminated: Any) -> torch.Tensor:
+        """``learner.terminal_value`` discounted to each row that ended its episode (a crash, leaving
+        the road), 0 elsewhere: gamma ** steps * terminal_value * terminated."""
+        dev = self.device
+        done = torch.as_tensor(np.asarray(terminated) != 0, dtype=torch.float32, device=dev)
+        powers = torch.pow(self.cfg.gamma, torch.as_tensor(np.asarray(steps), dtype=torch.float32, device=dev))
+        return powers * done * self.cfg.terminal_value
+
     def update(self, batch: Mapping[str, np.ndarray]) -> UpdateMetrics:
         cfg, dev = self.cfg, self.device
         obs = _tensor(batch["obs"], _obs_dtype(batch["obs"]), dev)
@@ -287,6 +295,9 @@ class DoubleDQN:
             else:  # vanilla DQN: the target net picks and values (its value at its own argmax)
                 next_q = q_next_target.max(dim=1).values
             td_target = reward + discount * next_q
+            if cfg.terminal_value:
+                # After a crash the target bootstraps learner.terminal_value instead of nothing.
+                td_target = td_target + self._terminal_value(batch["steps"], batch["terminated"])
         huber = F.huber_loss(q, td_target, reduction="none", delta=cfg.huber_delta)
         loss = (huber * _tensor(weight, torch.float32, dev)).mean() if weight is not None else huber.mean()
         margin_loss = bc_loss = q.new_zeros(())

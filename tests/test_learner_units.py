@@ -94,6 +94,21 @@ def test_terminal_transitions_do_not_bootstrap():
     assert out["td_abs"] == pytest.approx(3.0) and out["q_mean"] == pytest.approx(0.0)
 
 
+def test_a_terminal_step_bootstraps_the_terminal_value_discounted_by_its_steps():
+    agent = DoubleDQN((2,), 2, _cfg(gamma=0.5, terminal_value=-100.0))
+    _set_constant_q(agent.online, [0.0, 0.0])
+    _set_constant_q(agent.target, [8.0, 8.0])
+    b = _batch(obs=[[0, 0]] * 3, action=[0, 0, 0], reward=[3, 3, 3], next_obs=[[0, 0]] * 3, terminated=[1, 1, 0])
+    b["steps"] = np.array([1, 2, 2], np.uint8)  # n-step items: the crash 1 and 2 steps ahead, then a live row
+    agent.update(b)
+    # crash after 1 step: 3 + 0.5 * -100; after 2: 3 + 0.25 * -100; alive: 3 + 0.25 * 8 (Double DQN's target).
+    assert agent._last.td_target.tolist() == pytest.approx([-47.0, -22.0, 5.0])
+    plain = DoubleDQN((2,), 2, _cfg(gamma=0.5))
+    _set_constant_q(plain.target, [8.0, 8.0])
+    plain.update(b)
+    assert plain._last.td_target.tolist() == pytest.approx([3.0, 3.0, 5.0])  # the paper's: nothing after a crash
+
+
 def test_target_sync_period():
     agent = DoubleDQN((3,), 2, _cfg(target_update_period=5, lr=1e-2))
     rng = np.random.default_rng(0)
@@ -202,6 +217,8 @@ def test_schedule_and_average_options_are_checked():
         LearnerConfig(lr=1e-4, lr_final=1e-3)
     with pytest.raises(ConfigError, match="learner.ema_decay"):
         LearnerConfig(ema_decay=1.0)
+    with pytest.raises(ConfigError, match="learner.terminal_value"):
+        LearnerConfig(terminal_value=float("nan"))
 
 
 # --------------------------------------------------------------------------- weights

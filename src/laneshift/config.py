@@ -271,6 +271,13 @@ class LearnerConfig:
     cnn: Literal["nature", "small"] = "nature"
     target_update_period: int = 500  # updates between hard target-network syncs
     huber_delta: float = 1.0
+    # The value the TD target takes after an episode's terminal step (a crash or leaving the road)
+    # instead of 0 (the paper's). Condition 5 pays -5 for a crash and -1 a step for driving on in a
+    # non-target lane, so with gamma 0.99 a crash is worth more than waiting about five steps for a
+    # gap, and Q-learning learns to prefer it. A value at or below the worst way of staying alive
+    # (-1 / (1 - gamma) = -100 for driving on in a non-target lane) makes a crash never pay; the
+    # env's reward and the evaluation are unchanged.
+    terminal_value: float = 0.0
     grad_clip: float = 10.0  # global-norm gradient clipping (MATLAB threshold: 1)
     weight_decay: float = 0.0  # L2 regularisation (MATLAB: 1e-4)
     double: bool = True  # Double DQN target; False = vanilla DQN (for comparison)
@@ -319,6 +326,7 @@ class LearnerConfig:
             _check(getattr(self, name) >= 1, f"learner.{name}", "must be >= 1", getattr(self, name))
         _check(self.prefetch <= 64, "learner.prefetch", "must be <= 64", self.prefetch)
         _check(self.huber_delta > 0, "learner.huber_delta", "must be > 0", self.huber_delta)
+        _check(math.isfinite(self.terminal_value), "learner.terminal_value", "must be a finite number", self.terminal_value)
         _check(self.grad_clip > 0, "learner.grad_clip", "must be > 0", self.grad_clip)
         _check(self.weight_decay >= 0, "learner.weight_decay", "must be >= 0", self.weight_decay)
         _check(self.margin_loss_weight >= 0, "learner.margin_loss_weight", "must be >= 0", self.margin_loss_weight)
@@ -683,6 +691,11 @@ METHODS: dict[str, dict[str, Any]] = {
     # (about the last 1,000 updates) and exploration ends at 1 % (docs/RESULTS.md, the ablation).
     "dqfd-bc-anneal": {**_DQFD, "learner.bc_loss_weight": 1.0, "learner.dueling": True,
                        "learner.lr_final": 5e-5, "learner.ema_decay": 0.999, "actor.epsilon_final": 0.01},
+    # dqfd-bc-anneal for which a crash never pays: after a terminal step the target bootstraps -100,
+    # the value of driving on in a non-target lane for ever (learner.terminal_value).
+    "dqfd-bc-safe": {**_DQFD, "learner.bc_loss_weight": 1.0, "learner.dueling": True,
+                     "learner.lr_final": 5e-5, "learner.ema_decay": 0.999, "actor.epsilon_final": 0.01,
+                     "learner.terminal_value": -100.0},
 }
 
 
