@@ -1,6 +1,7 @@
 """DeepMind Reverb as a replay service: the peer of ``laneshift bench shards --shards 1``.
 
-What it is: a standalone benchmark (issue 13, P2/P3 "with each peer beside ours"). The same load as
+What it is: a standalone benchmark, so that laneshift's replay ingest rate and sample latency are
+reported beside a peer's (``laneshift bench all``: ``vs_reverb_*``, ``reverb_*``). The same load as
 laneshift's replay benchmark, on Reverb 0.14 (the replay service Acme uses):
 
 - one ``reverb.Server`` process with one table of ``--capacity`` items: uniform sampler, FIFO

@@ -1,6 +1,7 @@
 """RLlib's DQN on laneshift's straight-road lane-change env: the peer that laneshift is compared with.
 
-What it is: a standalone benchmark (issue 13). It registers ``laneshift/StraightLaneChange-v0``
+What it is: a standalone benchmark (``laneshift bench all`` sets its figures beside laneshift's as
+``vs_rllib_*``). It registers ``laneshift/StraightLaneChange-v0``
 (vector observation, 82 floats, 9 actions) with RLlib 2.60 and trains RLlib's own DQN with the
 settings of a default ``laneshift train --local`` run as far as RLlib can express them: MLP
 82-256-256-9 with ReLU, batch 256, replay ratio R sampled rows per inserted transition, 2 env

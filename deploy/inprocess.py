@@ -6,7 +6,7 @@ talking through in-memory links to a ReplayCore (one per shard with ``replay.sha
 worker sending to its shard and the learner sampling all through ``learner.shards.ShardedReplay``,
 as over zenoh). Every message still goes through the wire encoder and decoder, so the contract is
 exercised as in a real run.
-May import: the contract, ``deploy.builder`` and the learner's replay seams (``learner.links``, ``learner.shards``).
+May import: the contract, ``deploy.builder`` and the learner's replay seams (``learner.seams``, ``learner.shards``).
 
     >>> from laneshift.config import load_run_config
     >>> cfg = load_run_config(overrides={"env.scenario": "lka", "train.env_steps": 2000})  # doctest: +SKIP
@@ -24,8 +24,8 @@ from typing import Any
 from laneshift import wire
 from laneshift.config import RunConfig
 
-from laneshift.learner.links import ReplayThrough
-from laneshift.learner.shards import PendingSample, replay_over
+from laneshift.learner.seams import PendingSample, ReplayThrough
+from laneshift.learner.shards import replay_over
 
 from .builder import Builder
 

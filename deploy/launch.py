@@ -45,7 +45,7 @@ from .pinning import own_cpus, pin_process_tree, resolve_learner_core, restore_o
 from .ray_connection import RayConnection
 from .run_dir import RunDirLock, default_demo_dir, ensure_demo_shard, prepare_run_dir  # noqa: F401 - re-exported
 from .spec_process import SpecProcess
-from .summary import summarise
+from .summary import RunEnd, summarise
 
 
 # ---------------------------------------------------------------------------- signals
@@ -431,6 +431,14 @@ class Run:
             except Exception:  # noqa: BLE001 - already gone
                 pass
 
+    # -- end
+
+    def ended(self) -> RunEnd:
+        """What the summary reads of the run, once its components have stopped."""
+        return RunEnd(cfg=self.cfg, workers=[self.summaries[n] for n in self.builder.workers if n in self.summaries],
+                      learner={**self.progress.last, **(self.learner_final or {})}, replay=self.replay_final or {},
+                      where=dict(self.where), restarts=dict(self.deaths))
+
     def _say(self, text: str) -> None:
         self.progress.say(text)
 
@@ -509,7 +517,7 @@ def train(cfg: RunConfig, *, address: str | None = None, out: TextIO = sys.stdou
         run.kill_all()
         if run.progress.tty:
             out.write("\n")
-        result = summarise(run, why, time.monotonic() - started, out)
+        result = summarise(run.ended(), why, time.monotonic() - started, out)
         try:
             (run_dir / "summary.json").write_text(json.dumps(result, indent=2))
         except OSError as exc:  # a full or read-only run dir: the summary above is all there is

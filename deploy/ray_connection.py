@@ -28,7 +28,8 @@ from .errors import LaunchError
 @contextlib.contextmanager
 def _lean_private_cluster() -> Iterator[None]:
     """A private local cluster without three of Ray's side processes it has no use for
-    (docs/performance.md, fifth and sixth sittings; docs/deploy.md says what a local run lacks):
+    (less memory and a faster start, `laneshift bench run`; docs/performance.md; docs/deploy.md says
+    what a local run lacks):
 
     - the log monitor: it streams worker logs to the driver; ``log_to_driver=False``, the
       components write to ``<run dir>/logs``;

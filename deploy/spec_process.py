@@ -23,7 +23,8 @@ from .errors import LaunchError
 class SpecProcess:
     """``main`` in a child process started now; ``result()`` waits and returns the spec as a
     plain dict. A child, not a thread: highway-env, gymnasium and pygame (about 80 MB of RSS) then
-    never enter the launcher, which lives as long as the run (docs/performance.md, P8); the child
+    never enter the launcher, which lives as long as the run and counts in its peak memory
+    (`laneshift bench run`'s memory per process; docs/performance.md); the child
     runs beside Ray's start, as the thread did."""
 
     def __init__(self, cfg: RunConfig):

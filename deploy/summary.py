@@ -1,6 +1,9 @@
 """The end of ``laneshift train``: the summary lines and result (env steps, episodes, the
 learner's last status, replay losses, restarts, the final greedy evaluation).
 
+It reads a ``RunEnd`` (what the launcher's ``Run`` knows when its components have stopped), never
+the launcher itself: ``deploy.launch`` imports this module.
+
 Room: deploy, the wiring. May import: the contract and the env-running side's evaluation.
 """
 
@@ -8,22 +11,31 @@ from __future__ import annotations
 
 import shutil
 import sys
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, TextIO
+from typing import TextIO
 
-if TYPE_CHECKING:  # pragma: no cover
-    from laneshift.config import RunConfig
-
-    from .launch import Run
+from laneshift.config import RunConfig
 
 
-def summarise(run: Run, why: str, wall: float, out: TextIO) -> dict:
+@dataclass(frozen=True)
+class RunEnd:
+    """A finished run, as the summary reads it (``deploy.launch.Run.ended``)."""
+
+    cfg: RunConfig
+    workers: list[dict]  # each env worker's final summary, in the builder's order (those that returned one)
+    learner: dict  # the learner's last status, updated by its final result
+    replay: dict  # the replay servers' final stats as one ({} if they gave none)
+    where: dict[str, dict]  # component -> its placement (``node_id``, ``node_ip``)
+    restarts: dict[str, int]  # component -> how many times it died and was restarted
+
+
+def summarise(run: RunEnd, why: str, wall: float, out: TextIO) -> dict:
     """Print the summary lines to ``out``; return the run's result (``train``'s, which the
-    experiments read)."""
+    experiments read). With ``train.eval_episodes`` and a final checkpoint of a run that was not
+    cut short it also evaluates that network (greedy episodes in this process): ``eval``."""
     cfg, run_dir = run.cfg, Path(run.cfg.train.run_dir)
-    summaries = [run.summaries[n] for n in run.builder.workers if n in run.summaries]
-    last = {**run.progress.last, **(run.learner_final or {})}
-    replay = run.replay_final or {}
+    summaries, last, replay = run.workers, run.learner, run.replay
     actors = replay.get("actors", {})
     steps = sum(s["env_steps"] for s in summaries)
     episodes = sum(s["episodes"] for s in summaries)
@@ -49,7 +61,7 @@ def summarise(run: Run, why: str, wall: float, out: TextIO) -> dict:
             f"{k} on {v.get('node_ip')}" for k, v in placement.items()),
         f"replay          {replay.get('tables', {}).get('online', {}).get('inserted', '-')} items stored, "
         f"{lost_batches} batches ({lost_items} items) lost and counted",
-        f"restarts        " + (", ".join(f"{k} {v}" for k, v in run.deaths.items()) or "none"),
+        f"restarts        " + (", ".join(f"{k} {v}" for k, v in run.restarts.items()) or "none"),
         f"learner         {last.get('updates', 0):,} updates, final weights version {last.get('version', 0)}"
         + _updates_lost_text(last.get("restored_from")),
         *waits_line(cfg, waits),
@@ -62,11 +74,13 @@ def summarise(run: Run, why: str, wall: float, out: TextIO) -> dict:
     final = run_dir / "checkpoints" / "final.safetensors"
     result: dict = {"workers": summaries, "learner": last, "wall_s": round(wall, 1), "env_steps": steps,
                     "episodes": episodes, "eval": None, "ended_by": why, "placement": placement,
-                    "restarts": dict(run.deaths), "waits": waits,
+                    "restarts": dict(run.restarts), "waits": waits,
                     "replay": {"inserted": replay.get("tables", {}).get("online", {}).get("inserted"),
                                "lost_batches": lost_batches, "lost_items": lost_items,
                                "rejected": replay.get("rejected")}}
     if cfg.train.eval_episodes and final.exists() and why in ("done", "stopped"):
+        # Imported here, once the training processes have ended: gymnasium and the env's modules
+        # are loaded only for a run that evaluates.
         from laneshift.actors.evaluation import evaluate_checkpoint, format_result
 
         result["eval"] = evaluate_checkpoint(final, cfg.env, episodes=cfg.train.eval_episodes,

@@ -54,9 +54,10 @@ METRIC_NAMES = ("loss", "q_mean", "grad_norm", "td_abs", "margin_loss", "bc_loss
 # 2.4) do the same arithmetic in fewer dispatches. Measured on the 2-core AMD EPYC dev machine,
 # 1 torch thread, alternating rounds, updates per CPU-second relative to the bare loop with
 # torch's default Adam (`laneshift bench learner`'s bare torch): MLP b256 (89 k parameters)
-# fused 1.11 / 1.03, foreach 0.98 / 1.01, for-loop 0.98 / 1.00 (two sittings); Nature CNN b32
+# fused 1.11 / 1.03, foreach 0.98 / 1.01, for-loop 0.98 / 1.00 (two separate sessions); Nature CNN b32
 # (2.7 M parameters) fused 1.22, foreach 1.16, for-loop 1.05. Fused is the fastest on CPU, most
-# of all for the large CNN, and it is torch's fast path on CUDA too; elsewhere foreach.
+# of all for the large CNN, and it is torch's fast path on CUDA too; elsewhere foreach. To measure:
+# `laneshift bench learner --cases mlp-b256,cnn-b32 --rounds 3 --seconds 2`.
 _ADAM_IMPL = "fused"
 
 
@@ -167,12 +168,13 @@ class DoubleDQN:
             or type(m).__name__ in ("MLPQNetwork", "NatureCNN", "DuelingHead") for m in self.online.modules())
         # Double DQN's chooser Q_online(s', .): one online pass over cat(obs, next_obs), or a second
         # no-grad pass over next_obs. On CPU the second pass is the faster (measured, MLP batch 256,
-        # 1 thread, three alternating sittings, updates per CPU-second relative to the bare loop:
+        # 1 thread, three alternating sessions, updates per CPU-second relative to the bare loop:
         # one concatenated pass 0.83 / 0.92 / 0.94, two passes 1.04 / 1.11 / 1.03): the
         # update is bound by its matmuls, and in one pass next_obs joins the autograd graph, so
         # every backward matmul runs over twice the rows (half of them zero gradients), plus the
         # cat's copy. On CUDA the update is bound by kernel launches, which one pass saves (about
-        # 6 of the online forward's); that choice is not measured yet (no GPU in the P5 runs).
+        # 6 of the online forward's); that choice is not measured yet (no GPU in the runs of
+        # `laneshift bench learner`, which measures the update against a bare torch loop).
         # Both give the same target (tests/test_dqn_reference.py checks both).
         self.concat_online_pass = self.device.type == "cuda" and cfg.double and row_independent
         # The bootstrap discount per (steps, terminated) pair, gamma ** steps * (1 - terminated),
@@ -225,8 +227,9 @@ class DoubleDQN:
         if self.averaged is not None:  # a state saved without averaging restarts the average at online
             self.averaged.load_state_dict(state.get("averaged", state["online"]))
         self.optimizer.load_state_dict(state["optimizer"])
-        # A saved param group carries its own foreach/fused flags (a state written before P5 has
-        # the for-loop's None): the implementation is this code's choice, not the checkpoint's.
+        # A saved param group carries its own foreach/fused flags (a state written before Adam's
+        # implementation was chosen here has the for-loop's None): the implementation is this
+        # code's choice, not the checkpoint's.
         for group in self.optimizer.param_groups:
             group.update(self._adam_impl())
         self.updates = int(state["updates"])

@@ -1,65 +1,30 @@
-"""The learner's seams (Acme style): the same Learner runs over zenoh or in-process.
+"""The learner's links over zenoh: the seams of ``seams`` (``ReplayClient``, ``WeightsPublisher``,
+``RunChannel``, as one ``LearnerLinks``) built on a zenoh session.
 
-- ``ReplayClient``: ``sample(SampleRequest)`` -> SampledBatch, a WireError (not ready / rate
-  limited) or None; ``send_priorities(bytes)``; ``replay_stats()`` / ``replay_control(body)``
-  (one replay server: ``ZenohReplayShard``; several: ``shards.ShardedReplay`` over one each, a
-  ``ReplayShardClient``, which can also send a request before waiting for it: ``request_sample``);
-- ``WeightsPublisher``: ``publish_weights(bytes)`` (safetensors with a version, ``laneshift.qnet``);
-- ``RunChannel``: ``take_episodes()`` (the workers' episode records, as sent: the learner
-  validates and counts them), ``publish_stats(bytes)``, ``stop_requested()``, ``stop_all()``.
+- ``ZenohReplayShard``: one replay server's ``ReplayShardClient`` (queries on its namespace's keys);
+- ``ZenohLearnerLinks``: the learner's ``LearnerLinks``: the replay through one ``ZenohReplayShard``
+  (or ``shards.ShardedReplay`` over one per shard), weights published with BLOCK and served to late
+  joiners, the workers' episode records, the learner's stats and the run's stop.
 
-Room: learner (component). May import: the contract and laneshift.learner; never another component.
+Room: learner (component). May import: the contract and laneshift.learner (``seams``, ``shards``);
+never another component.
 """
 
 from __future__ import annotations
 
 import collections
 import threading
-from typing import Protocol, TypeVar
+from typing import TypeVar
 
 import zenoh
 
 from laneshift import transport, wire
 from laneshift.config import RunConfig
 
-from .shards import PendingSample, replay_over
+from .seams import PendingSample, ReplayClient, ReplayThrough
+from .shards import replay_over
 
 T = TypeVar("T")
-
-
-class ReplayClient(Protocol):
-    """The replay server, as the learner uses it."""
-
-    def sample(self, req: wire.SampleRequest) -> wire.SampledBatch | wire.WireError | None: ...
-    def send_priorities(self, payload: bytes) -> None: ...
-    def replay_stats(self) -> dict | None: ...
-    def replay_control(self, body: dict) -> dict | None: ...
-
-
-class ReplayShardClient(ReplayClient, Protocol):
-    """One replay server of several: ``request_sample`` sends the request and returns the call
-    that waits for its reply, so ``ShardedReplay`` asks every shard before it waits for any."""
-
-    def request_sample(self, req: wire.SampleRequest) -> PendingSample: ...
-
-
-class WeightsPublisher(Protocol):
-    """The weights broadcast to the env workers."""
-
-    def publish_weights(self, payload: bytes) -> None: ...
-
-
-class RunChannel(Protocol):
-    """Episode records in, the learner's stats out, and the run's stop."""
-
-    def take_episodes(self) -> list[bytes]: ...
-    def publish_stats(self, payload: bytes) -> None: ...
-    def stop_requested(self) -> bool: ...
-    def stop_all(self) -> None: ...
-
-
-class LearnerLinks(ReplayClient, WeightsPublisher, RunChannel, Protocol):
-    """All three seams, as one object (what the builder hands the learner)."""
 
 
 class ZenohReplayShard:
@@ -111,25 +76,6 @@ class ZenohReplayShard:
 
     def send_priorities(self, payload: bytes) -> None:
         self._priorities.put(payload)
-
-
-class ReplayThrough:
-    """The ``ReplayClient`` half of a LearnerLinks, handed on to ``self.replay``: one replay
-    server's client, or ``ShardedReplay`` over one per shard (zenoh and in-process links alike)."""
-
-    replay: ReplayClient
-
-    def sample(self, req: wire.SampleRequest) -> wire.SampledBatch | wire.WireError | None:
-        return self.replay.sample(req)
-
-    def replay_stats(self) -> dict | None:
-        return self.replay.replay_stats()
-
-    def replay_control(self, body: dict) -> dict | None:
-        return self.replay.replay_control(body)
-
-    def send_priorities(self, payload: bytes) -> None:
-        self.replay.send_priorities(payload)
 
 
 class ZenohLearnerLinks(ReplayThrough):

@@ -44,9 +44,10 @@ from laneshift.envspec import EnvSpec
 from laneshift.qnet import save_checkpoint, to_wire
 
 from .dqn import METRIC_NAMES, DoubleDQN
-from .links import LearnerLinks, ZenohLearnerLinks
+from .links import ZenohLearnerLinks
 from .metrics import EvaluatePolicy, GreedyEval, MetricsLog
 from .prefetch import Prefetcher
+from .seams import LearnerLinks
 
 
 #: How long the end of a run waits for a running greedy evaluation (train.eval_every) before cancelling it.
@@ -96,7 +97,8 @@ class Learner:
         self.sample_wait_s = self._wait_at_last_log = 0.0  # the update thread's time waiting on a batch
         # When the first batch came, and sample_wait_s then: the wait while the replay fills to
         # replay.min_size is by design, so the run's summary ("which side bounded the run") counts
-        # from here. It was most of the 2-10 % the learner was said to wait (issue 13).
+        # from here. It was most of the 2-10 % the learner was once measured to wait in whole runs
+        # (`laneshift bench run`'s ``waits``).
         self.first_batch_at: float | None = None
         self._wait_before_first_batch = 0.0
         self.checkpoint_failures = 0  # writes that failed (full disk, read-only dir): counted, retried later
@@ -569,7 +571,9 @@ def _split(batch: wire.SampledBatch) -> list[dict[str, np.ndarray]]:
 #: The learner process's GIL switch interval (Python's default: 5 ms). The update thread gives the
 #: GIL up around each torch op; when the prefetch thread's decode or a zenoh callback holds it, the
 #: update waits for up to this long. 0.5 ms: +2.5 % and +4 % env steps/s in two alternating rounds
-#: of a 40,000-step run (docs/performance.md, fourth sitting). A learner process's setting only:
+#: of a 40,000-step run, alternating with the default (`laneshift train --local --workers 2 --scenario
+#: straight --env-steps 40000`, rates from its metrics.jsonl; docs/performance.md). A learner process's
+#: setting only:
 #: in-process mode runs every component in one process and keeps Python's default.
 LEARNER_SWITCH_INTERVAL_S = 0.0005
 
@@ -612,8 +616,9 @@ def run_learner(cfg: RunConfig, spec: EnvSpec, evaluate: EvaluatePolicy | None =
     # with them for the same cores (on a 2-core node, for all of them) while the default MLP's
     # matmuls (batch 256 x 256 units) are small for intra-op parallelism; a GPU learner's CPU side
     # only launches kernels. Measured on a 2-core machine with the whole system running, two threads
-    # made the run slower (0.71x and 0.95x env steps/s, issue 13); raise it on a node whose cores
-    # the learner has to itself.
+    # made the run slower (0.71x and 0.95x env steps/s against one thread; `laneshift bench run
+    # --train-args "--workers 2 --set learner.torch_threads=2"` measures a run's env steps/s); raise
+    # it on a node whose cores the learner has to itself.
     torch.set_num_threads(cfg.learner.torch_threads)
     tune_learner_process()
     stop = threading.Event()

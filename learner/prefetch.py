@@ -2,7 +2,8 @@
 
 Without it the learner alternates: ask the replay server, wait for the reply (a round trip
 through the router and a decode of ~175 KB per 256 rows), then update. Measured inside a running
-system, the learner waited 18 % of its time on sample replies (issue 13). ``Prefetcher`` runs the
+system, the learner waited 18 % of its time on sample replies (``learner_sample_wait_share`` in
+`laneshift bench run`'s ``waits``). ``Prefetcher`` runs the
 requests on a thread of their own, one request ahead of the updates (``depth`` replies queued):
 zenoh's query and numpy's decode release the GIL, so the round trip overlaps torch's update.
 

@@ -29,25 +29,21 @@ before it waits for any reply (``request_sample``), and keeps every rule of one 
 The weights are one reply old (the sizes and masses come with each shard's previous batch); a
 shard's proportion moves by its inserts between two requests, a few rows in thousands.
 
-Room: learner (component). May import: the contract and laneshift.learner; never another component.
+Room: learner (component). May import: the contract and laneshift.learner (``seams``); never another component.
 """
 
 from __future__ import annotations
 
 import concurrent.futures
 import threading
-from typing import TYPE_CHECKING, Callable, Sequence
+from typing import Sequence
 
 import numpy as np
 
 from laneshift import wire
 from laneshift.replay_stats import merge_replay_stats
 
-if TYPE_CHECKING:  # links.py builds this class: no import cycle at run time
-    from .links import ReplayClient, ReplayShardClient
-
-# A sample request already sent: calling it waits for the reply (``ReplayShardClient.request_sample``).
-PendingSample = Callable[[], "wire.SampledBatch | wire.WireError | None"]
+from .seams import ReplayClient, ReplayShardClient
 
 
 def split_rows(rows: int, weights: Sequence[float]) -> list[int]:
@@ -67,7 +63,7 @@ def split_rows(rows: int, weights: Sequence[float]) -> list[int]:
     return [int(c) for c in counts]
 
 
-def replay_over(shards: Sequence["ReplayShardClient"], beta: float = 0.4, seed: int = 0) -> "ReplayClient":
+def replay_over(shards: Sequence[ReplayShardClient], beta: float = 0.4, seed: int = 0) -> ReplayClient:
     """The learner's ``ReplayClient`` for ``shards``: the one client itself, or ``ShardedReplay``
     over several (``beta``, ``seed``: its importance weights and row shuffle)."""
     return shards[0] if len(shards) == 1 else ShardedReplay(shards, beta=beta, seed=seed)
@@ -76,7 +72,7 @@ def replay_over(shards: Sequence["ReplayShardClient"], beta: float = 0.4, seed: 
 class ShardedReplay:
     """A ``ReplayClient`` over one ``ReplayShardClient`` per shard (see the module's text)."""
 
-    def __init__(self, shards: Sequence["ReplayShardClient"], beta: float = 0.4, seed: int = 0):
+    def __init__(self, shards: Sequence[ReplayShardClient], beta: float = 0.4, seed: int = 0):
         if len(shards) < 2:
             raise ValueError("ShardedReplay needs at least 2 shards; use the one client itself")
         self.shards, self.n, self.beta = list(shards), len(shards), beta

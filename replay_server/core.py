@@ -35,8 +35,8 @@ from typing import Any
 import numpy as np
 
 from laneshift.config import ReplayConfig
-from laneshift.wire import (PriorityUpdate, SampledBatch, SampleRequest, TransitionSchema, WireError,
-                            decode_priorities, decode_sample_request, decode_transitions, encode_batch,
+from laneshift.wire import (WIRE_VERSION, PriorityUpdate, SampledBatch, SampleRequest, TransitionSchema,
+                            WireError, decode_priorities, decode_sample_request, decode_transitions, encode_batch,
                             encode_error)
 
 from .frames import FrameRingTable
@@ -442,6 +442,14 @@ class ReplayCore:
             names = sorted(self.actors)[offset:offset + limit]
             return {"total": len(self.actors), "offset": offset,
                     "actors": {n: dict(self.actors[n]) for n in names}}
+
+    def info(self, run_id: str | None) -> dict[str, Any]:
+        """The body of ``replay/info`` over zenoh and of HTTP ``/info``: what a client needs to
+        build TRANSITIONS (the wire version, observation shape and dtype, action count), with the
+        run id it is served under, the demo mode and the HTTP API's URL."""
+        schema = self.schema
+        return {"wire_version": WIRE_VERSION, "obs_shape": list(schema.obs_shape), "obs_dtype": schema.obs_dtype,
+                "n_actions": schema.n_actions, "run_id": run_id, "mode": self.mode, "http_url": self.http_url}
 
     def _actors_total(self) -> dict[str, int]:
         """Sums over every actor, evicted ones included (called under the lock)."""

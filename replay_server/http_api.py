@@ -21,8 +21,9 @@ The pieces: ``views`` (what is read from the core), ``http_models`` (the JSON an
 shapes), ``prometheus`` (``/metrics`` with prometheus_client); this module is the app and its
 thread server.
 
-Room: replay_server (component). May import: the replay core and the modules above (and, for
-``/info``, ``.service``), fastapi, uvicorn, prometheus_client, numpy; nothing that writes to the core.
+Room: replay_server (component). May import: the replay core and the modules above, fastapi, uvicorn,
+prometheus_client, numpy; never ``.service`` (which imports this module to serve it) and nothing
+that writes to the core.
 
     >>> from laneshift.config import ReplayConfig
     >>> from laneshift.wire import TransitionSchema
@@ -114,9 +115,7 @@ def make_app(core: ReplayCore) -> FastAPI:
     def info() -> Response:
         """What ``replay/info`` answers over zenoh: the wire version, observation shape and dtype,
         action count, run id, demo mode and this API's URL."""
-        from .service import ReplayService  # zenoh and the config: loaded already in a replay server
-
-        return SafeJSONResponse(ReplayService.info_of(core, core.identity.get("run_id")))
+        return SafeJSONResponse(core.info(core.identity.get("run_id")))
 
     registry = metrics_registry(core)
 

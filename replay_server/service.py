@@ -76,13 +76,6 @@ class ReplayService:
         # On the core, like http_url: the HTTP API (which gets only the core) reads it for /metrics.
         self.sample_latency = core.sample_latency = SampleLatency()
 
-    @staticmethod
-    def info_of(core: ReplayCore, run_id: str | None) -> dict:
-        """The body of ``replay/info`` (and HTTP ``/info``): what a client needs to build TRANSITIONS."""
-        schema = core.schema
-        return {"wire_version": wire.WIRE_VERSION, "obs_shape": list(schema.obs_shape), "obs_dtype": schema.obs_dtype,
-                "n_actions": schema.n_actions, "run_id": run_id, "mode": core.mode, "http_url": core.http_url}
-
     def _sample(self, payload: bytes) -> bytes | bytearray:
         start = time.perf_counter()
         reply = self.core.handle_sample_query(payload)
@@ -115,7 +108,7 @@ class ReplayService:
               self.stop_event, "replay-stats"),
             q(self.session, wire.replay_control_key(self.run_id), self._control, self.stop_event, "replay-control"),
             q(self.session, wire.replay_info_key(self.run_id),
-              lambda _: wire.encode_json(self.info_of(self.core, self.run_id)), self.stop_event, "replay-info"),
+              lambda _: wire.encode_json(self.core.info(self.run_id)), self.stop_event, "replay-info"),
         ]
         return self
 

@@ -18,7 +18,9 @@ from .http_models import TABLES, _f32, _obs_lists
 
 
 def _table_views(core: ReplayCore, stats: dict) -> dict[str, dict]:
-    """What the issue asks per table, computed from ``stats`` plus the online table's actor column."""
+    """Each table's rates, shares of the buffer and of recent samples, items per actor, rate limiter
+    and checkpoint age (docs/replay-api.md, ``/stats``), computed from ``stats`` plus the online
+    table's actor column."""
     with core.lock:
         size = core.online.size
         actor_rows = core.online.actor[:size].copy()  # rows of live items: keys are contiguous

@@ -1,5 +1,5 @@
-"""`laneshift bench all`'s derived targets (issue 13) from its benchmarks' outputs: the arithmetic,
-and null where a benchmark did not run.
+"""`laneshift bench all`'s derived targets (``targets``; bench/suite.py says what each ``p*_`` key
+measures) from its benchmarks' outputs: the arithmetic, and null where a benchmark did not run.
 
 Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
 the code under test needs.

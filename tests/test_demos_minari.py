@@ -28,7 +28,7 @@ from laneshift.demos import (
 )
 from laneshift.demos.cli import main
 from laneshift.demos.envsupport import make_env
-from laneshift.demos.generate import run_episode, scripted_driver
+from laneshift.demos.drivers import run_episode, scripted_driver
 from laneshift.demos.shard import dataset_data_dir, read_metadata
 
 STRAIGHT = "laneshift/StraightLaneChange-v0"

@@ -1,4 +1,4 @@
-"""The documentation a third party relies on, checked against the code (issue 14).
+"""The documentation a third party relies on, checked against the code, so it cannot drift from it.
 
 What it is: docs/wire.md §12's commands run as written (a router and a standalone replay server
 as subprocesses, then docs/examples/foreign_client.py against them), and docs/wire.md's stated

@@ -84,7 +84,8 @@ def test_train_method_applies_the_named_settings_under_mode_and_set(monkeypatch,
     assert cli.main(["train", "--method", "dqfd", "--mode", "retention"]) == 0
     assert seen.pop("cfg").replay.demo_mode == "retention"  # so does --mode
     assert cli.main(["train", "--method", "dqfq"]) != 0 and "cfg" not in seen
-    assert "--method: unknown 'dqfq' (known: none, retention, rehearsal, dqfd, dqfd-bc)" in capsys.readouterr().err
+    known = ", ".join(METHODS)  # every named method, in order
+    assert f"--method: unknown 'dqfq' (known: {known})" in capsys.readouterr().err
 
 
 def test_the_human_like_stand_in_row_runs_on_the_test_episodes_of_both_lanes():

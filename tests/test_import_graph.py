@@ -8,9 +8,13 @@ inside functions), read with ``ast`` so nothing is imported to check it:
   imports the contract and itself, never another component, ``deploy`` or a tool;
 - ``laneshift.deploy`` (the builder and the launchers) imports the contract, the components and
   the demo tools, never the studies, the benchmarks or the CLI;
-- the tools (``laneshift.cli``, ``studies``, ``bench``, the demo tools) may import anything.
+- the tools (``laneshift.cli``, ``studies``, ``bench``, the demo tools) may import anything;
+- and no module imports itself through others: no circle of imports, however deep, counting
+  every import statement (inside a function or under ``if TYPE_CHECKING:`` too), since an import
+  deferred to hide a circle still ties the two modules together. A circle is designed out by
+  moving the piece both sides need into a module of its own, or down a floor.
 
-``python tests/test_import_graph.py`` prints which floor imports which.
+``python tests/test_import_graph.py`` prints which floor imports which, and any circle.
 May import: the standard library and pytest.
 """
 
@@ -58,11 +62,12 @@ def modules() -> dict[str, Path]:
     return found
 
 
-def imports_of(name: str, path: Path, known: set[str]) -> set[str]:
-    """The package modules ``path`` imports (``from x import y`` counts ``x.y`` when it is a module)."""
+def import_sites(name: str, path: Path, known: set[str]) -> dict[str, int]:
+    """The package modules ``path`` imports, each with the line of its first import statement
+    (``from x import y`` counts ``x.y`` when it is a module)."""
     is_package = path.name == "__init__.py"
     here = name if is_package else name.rsplit(".", 1)[0]
-    out: set[str] = set()
+    out: dict[str, int] = {}
     for node in ast.walk(ast.parse(path.read_text(), str(path))):
         if isinstance(node, ast.Import):
             targets = [a.name for a in node.names]
@@ -80,8 +85,13 @@ def imports_of(name: str, path: Path, known: set[str]) -> set[str]:
                 while target not in known and "." in target:  # an attribute, not a module
                     target = target.rsplit(".", 1)[0]
                 if target in known and target != name:
-                    out.add(target)
+                    out[target] = min(out.get(target, node.lineno), node.lineno)
     return out
+
+
+def imports_of(name: str, path: Path, known: set[str]) -> set[str]:
+    """The package modules ``path`` imports (``from x import y`` counts ``x.y`` when it is a module)."""
+    return set(import_sites(name, path, known))
 
 
 def allowed(importer: str, imported: str) -> bool:
@@ -110,7 +120,85 @@ def report(g: dict[str, set[str]]) -> str:
             edges[(label(importer), label(target))] += 1
     lines = [f"{len(g)} modules; imports between floors (importer -> imported: import statements' targets)"]
     lines += [f"  {a:>13} -> {b:<13} {n:4d}" for (a, b), n in sorted(edges.items())]
+    found = circles(g)
+    lines.append(f"circles of imports: {len(found)}" + (" (" + ", ".join(
+        "known" if frozenset(c) in KNOWN_CIRCLES else "NEW" for c in found) + ")" if found else ""))
+    lines += [f"  {' -> '.join(circle_through(g, c))}" for c in found]
     return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------- circles
+
+#: Circles allowed for now, each with why it is not designed out yet (an entry that is no longer a
+#: circle fails the test too, so the list only shrinks).
+KNOWN_CIRCLES: dict[frozenset[str], str] = {}
+
+
+def circles(g: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected parts of ``g`` with more than one module (Tarjan's algorithm, without
+    recursion), each sorted, in sorted order: every module of one imports every other, in steps."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+    for root in sorted(g):
+        if root in index:
+            continue
+        work = [(root, iter(sorted(g[root])))]
+        index[root] = low[root] = len(index)
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            node, children = work[-1]
+            child = next(children, None)
+            if child is not None:
+                if child not in g:
+                    continue
+                if child not in index:
+                    index[child] = low[child] = len(index)
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append((child, iter(sorted(g[child]))))
+                elif child in on_stack:
+                    low[node] = min(low[node], index[child])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[node])
+            if low[node] == index[node]:
+                part = []
+                while True:
+                    member = stack.pop()
+                    on_stack.discard(member)
+                    part.append(member)
+                    if member == node:
+                        break
+                if len(part) > 1:
+                    found.append(sorted(part))
+    return sorted(found)
+
+
+def circle_through(g: dict[str, set[str]], part: list[str], start: str | None = None) -> list[str]:
+    """One shortest circle in ``part`` (a result of ``circles``) from ``start`` (default: its first
+    module) back to it: ``[a, b, ..., a]``."""
+    start, members = start or part[0], set(part)
+    came_from: dict[str, str] = {}
+    frontier = [start]
+    while frontier:
+        following = []
+        for node in frontier:
+            for child in sorted(g[node] & members):
+                if child == start:
+                    path = [node]
+                    while path[-1] != start:
+                        path.append(came_from[path[-1]])
+                    return [*reversed(path), start]
+                if child not in came_from:
+                    came_from[child] = node
+                    following.append(child)
+        frontier = following
+    raise AssertionError(f"{part} is not a circle of g")
 
 
 def test_every_import_keeps_to_its_floor():
@@ -132,11 +220,49 @@ def test_the_floors_are_what_the_rules_say():
     assert allowed("laneshift.studies.experiments", "laneshift.deploy.local")
 
 
+def test_no_module_imports_itself_through_others():
+    """Every import statement counts, inside a function or under ``if TYPE_CHECKING:`` too."""
+    mods = modules()
+    known = set(mods)
+    sites = {name: import_sites(name, path, known) for name, path in mods.items()}
+    g = {name: set(found) for name, found in sites.items()}
+    found = circles(g)
+    new = [c for c in found if frozenset(c) not in KNOWN_CIRCLES]
+
+    def shown(part: list[str]) -> str:
+        """The circles through every module of ``part``, each import with its file and line."""
+        lines, covered = [], set()
+        for start in part:
+            if start in covered:
+                continue
+            steps = circle_through(g, part, start)
+            covered.update(steps)
+            lines.append(f"  {' -> '.join(steps)}")
+            lines += [f"    {a} -> {b}  ({mods[a].relative_to(ROOT)}:{sites[a][b]})" for a, b in zip(steps, steps[1:])]
+        return "\n".join(lines)
+
+    assert not new, ("circles of imports (move what both sides need into a module of its own, or down a "
+                     "floor; an import inside a function still counts):\n" + "\n".join(shown(c) for c in new))
+    gone = sorted(" <-> ".join(sorted(c)) for c in KNOWN_CIRCLES if sorted(c) not in found)
+    assert not gone, "no longer circles; remove them from KNOWN_CIRCLES: " + "; ".join(gone)
+
+
+def test_circles_are_found_however_deep():
+    g = {"a": {"b"}, "b": {"c"}, "c": {"a", "d"}, "d": set(), "e": {"f"}, "f": {"e"}, "g": {"a"}}
+    assert circles(g) == [["a", "b", "c"], ["e", "f"]]
+    assert circle_through(g, ["a", "b", "c"]) == ["a", "b", "c", "a"]
+    assert circle_through(g, ["e", "f"]) == ["e", "f", "e"]
+    assert circle_through(g, ["a", "b", "c"], "c") == ["c", "a", "b", "c"]
+    assert circles({"a": {"b"}, "b": {"c"}, "c": set()}) == []
+
+
 @pytest.mark.parametrize("text, expected", [
     ("from laneshift.learner.dqn import DoubleDQN", {"laneshift.learner.dqn"}),
     ("def f():\n    from laneshift.learner import dqn", {"laneshift.learner", "laneshift.learner.dqn"}),
     ("import laneshift.wire", {"laneshift.wire"}),
     ("from .frames import FrameStore", {"laneshift.replay_server.frames"}),
+    ("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from ..learner.dqn import DoubleDQN",
+     {"laneshift.learner.dqn"}),
 ])
 def test_imports_are_found_at_module_level_and_inside_functions(tmp_path, text, expected):
     path = tmp_path / "x.py"

@@ -65,7 +65,7 @@ def test_stop_return_ends_the_run_at_the_first_episode_that_reaches_it(tmp_path)
 
 
 def test_pixel_run_learns_from_frames_held_once_each(tmp_path):
-    """The paper's observation end to end (issue 16): 4 x 100 x 100 uint8 frames from the env, on the
+    """The paper's observation end to end: 4 x 100 x 100 uint8 frames from the env, on the
     wire, in a frame table that holds each frame about once, into the small CNN's updates."""
     cfg = load_run_config(overrides={**FAST, "env.scenario": "straight", "env.observation": "grayscale",
                                      "learner.cnn": "small", "train.env_steps": 600, "actor.send_every": 20,

@@ -1,4 +1,4 @@
-"""The install rule (issue 30): which torch build ``deploy/install_torch.py`` installs, the script
+"""The install rule: which torch build ``deploy/install_torch.py`` installs, the script
 that ``make``, ``deploy/ray-cluster.yaml`` and the KubeRay Dockerfile all run, and what the package
 declares (``pyproject.toml``'s ranges against ``constraints.txt``'s tested set; the environments
 without torch, Ray, zenoh or FastAPI).

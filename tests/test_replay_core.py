@@ -245,10 +245,9 @@ def test_rehearsal_phase2_is_online_only_and_phases_never_go_back():
 
 
 def test_rehearsal_phase2_demo_share_of_buffer_is_zero():
-    """BUG: core.py ``stats``: ``total`` leaves the demos out in rehearsal phase 2 but
-    ``demo_in_buffer`` still counts them, so ``demo_share_buffer`` = demo.size / online.size
-    (here 64 / 40 = 1.6, a share above 1). Fix: ``demo_in_buffer = self.demo.size if
-    self.mode == "retention" or self.phase == 1 else 0``."""
+    """In rehearsal's phase 2 the demos are no longer sampled, so they are not in "the buffer"
+    either: ``demo_share_buffer`` is 0, not demo.size / online.size (here 64 / 40 = 1.6, a share
+    above 1, if the demos were counted above a total that leaves them out)."""
     core = make_core("rehearsal", demo=64, min_size=20)
     core.set_phase(2)
     fill(core, 40, batch=10)
@@ -354,12 +353,11 @@ def test_too_many_actors(monkeypatch):
 
 @pytest.mark.parametrize("version", [2**31, 2**63, 10**30])
 def test_ingest_huge_weights_version_never_raises_nor_stores_partially(version):
-    """BUG: wire accepts any non-negative JSON integer as ``weights_version`` but RingTable.version
-    is int32: ``ingest`` raises OverflowError for 2**31 *after* writing obs/actions into the ring
-    and after updating the actor's counters (``last_version`` = 2**31 then satisfies any sync
-    readiness). In the service the ingest thread has no handler, so one such message stops all
-    ingestion. Fix: bound the header counters on decode (e.g. ``< 2**53``, reason bad_header), make
-    RingTable.version int64, and convert before writing anything."""
+    """A huge ``weights_version`` never makes ``ingest`` raise: the batch is stored whole (the ring's
+    version column is int64) or refused with nothing changed. Written half way, an OverflowError
+    would leave rows in the ring and ``last_version`` at 2**31 (which satisfies any sync readiness),
+    and in the service it would end the ingest thread, which has no handler: all ingestion would
+    stop."""
     core = make_core()
     fill(core, 8, batch=4, actors=("w0",))
     before, actors = snapshot(core.online), core.stats()["actors"]

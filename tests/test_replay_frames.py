@@ -1,4 +1,5 @@
-"""Stacked frames held once per frame in the replay server (``replay_server/frames.py``, issue 16).
+"""Stacked frames held once per frame in the replay server (``replay_server/frames.py``): stored as
+whole stacks, the paper's 4 x 100 x 100 observations would keep every frame 8 times (obs, next_obs).
 
 Each actor drives synthetic episodes whose frames are random images; its observations are the
 shifting 4-frame stacks a frame-stacking env makes (reset: the first frame 4 times), sent as

@@ -198,8 +198,9 @@ def test_malformed_messages_are_counted_and_dropped(replay_server_process):
 
 
 def test_a_router_process_never_imports_numpy():
-    """P8: a router actor's process builds its router as ``RouterActor`` does (its config without an
-    env spec, the builder, a listening session) and never loads the wire module or numpy (13 MB)."""
+    """A router actor's process builds its router as ``RouterActor`` does (its config without an
+    env spec, the builder, a listening session) and never loads the wire module or numpy (13 MB of a
+    run's peak memory, which `laneshift bench run` measures per process)."""
     port = transport.free_tcp_port()
     code = ("import sys; from laneshift.deploy.actors import _config; from laneshift.deploy.builder import Builder; "
             "from laneshift.config import RunConfig; cfg, spec = _config(RunConfig().to_dict()); "
@@ -232,9 +233,9 @@ def test_sigint_leaves_no_process_behind(tmp_path):
             pytest.fail("training never started:\n" + "".join(lines))
         family = _descendants(proc.pid)
         assert len(family) >= 5, family  # replay server, learner, Ray's processes and workers
-        # P8's cuts: no log monitor, autoscaler monitor nor API server (dashboard.py) in a private
-        # cluster, and the launcher holds no simulator while training (the env's spec came from a
-        # child process).
+        # What keeps a run's peak memory down (`laneshift bench run`): no log monitor, autoscaler
+        # monitor nor API server (dashboard.py) in a private cluster, and the launcher holds no
+        # simulator while training (the env's spec came from a child process).
         labels = {process_label(p, proc.pid) for p in family}
         assert "ray gcs" in labels and not labels & {"ray log monitor", "ray monitor", "ray dashboard"}, labels
         # The router runs in the launcher (deploy.router_in auto, local mode), and the temp-dir

@@ -1,5 +1,5 @@
-"""Every network wait says what it waits for (issue 14): one line after a few seconds naming the
-endpoint or key, again at most every 30 s, and one when it is over.
+"""Every network wait says what it waits for, so a waiting process is never silent: one line
+after a few seconds naming the endpoint or key, again at most every 30 s, and one when it is over.
 
 What it is: transport.WaitLines and wait_with_lines on a fake clock; an env worker's links waiting
 for weights through a real router in this process; and a real `laneshift learner` started with no

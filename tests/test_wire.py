@@ -381,9 +381,9 @@ def test_nan_and_infinity_in_header_refused(const):
 
 
 def test_header_number_overflowing_to_infinity_refused():
-    """BUG: ``1e999`` parses to ``inf`` and passes, although NaN/Infinity literals are refused and the
-    encoder (``allow_nan=False``) can never write a non-finite header. A ``float('inf')`` smuggled into
-    a JSON body reaches e.g. the learner's episode statistics (``float(ep["return"])``)."""
+    """``1e999`` parses to ``inf``: it is refused like the NaN/Infinity literals, which the encoder
+    (``allow_nan=False``) can never write either. Let through, a ``float('inf')`` in a JSON body would
+    reach e.g. the learner's episode statistics (``float(ep["return"])``)."""
     head = b'{"body":{"return":1e999},"arrays":[]}'
     assert reason_of(decode, envelope(6, head)) == "bad_header"
 
@@ -396,8 +396,8 @@ def test_unknown_dtype(code):
 
 @pytest.mark.parametrize("code", [[], {}, ["<f4"]])
 def test_unhashable_dtype_is_a_wire_error(code):
-    """BUG: ``code not in ALLOWED_DTYPES`` (wire.py ``_read_array``) hashes ``code``; a JSON list or
-    object there raises ``TypeError: unhashable type`` instead of WireError("bad_dtype")."""
+    """A JSON list or object as an array's dtype is WireError("bad_dtype"), not the
+    ``TypeError: unhashable type`` that looking it up in ``ALLOWED_DTYPES`` would raise."""
     head = {"body": {}, "arrays": [{"name": "a", "dtype": code, "shape": [1]}]}
     assert reason_of(decode, envelope(6, head, b"\0")) == "bad_dtype"
 
@@ -464,11 +464,10 @@ def test_duplicate_array_names():
 
 
 def test_deeply_nested_header_is_a_wire_error():
-    """BUG: json.loads raises RecursionError (not ValueError) on ~1000 nested brackets, which fit
-    easily in a 64 KiB header. ``decode`` only catches UnicodeDecodeError/JSONDecodeError/ValueError,
-    so RecursionError escapes every decoder. The learner (``_should_stop``) and the actors
-    (``stop_requested``, ``_update_flow``) catch only WireError around ``decode_json`` of the
-    ``control``/``replay/flow`` keys: one such message published there kills them."""
+    """json.loads raises RecursionError (not ValueError) on ~1000 nested brackets, which fit easily
+    in a 64 KiB header; every decoder turns it into WireError("bad_header"). The learner and the env
+    workers catch only WireError around ``decode_json`` of the ``control``/``replay/flow`` keys, so
+    anything else escaping would let one such message published there kill them."""
     deep = b'{"body":' + b"[" * 5000 + b"]" * 5000 + b',"arrays":[]}'
     assert reason_of(decode_json, envelope(6, deep)) == "bad_header"
     deep_t = b'{"actor":"w0","extra":' + b"[" * 5000 + b"]" * 5000 + b',"arrays":[]}'
@@ -628,10 +627,10 @@ def test_key_builders_reject_bad_names(bad):
 
 
 def test_names_with_a_trailing_newline_are_refused():
-    """BUG: ``_NAME = re.compile(r"^[A-Za-z0-9_\\-]{1,64}$")`` is applied with ``.match``; ``$``
-    also matches before a final newline, so "w0\\n" passes every name check: key builders, the
-    actor in transitions headers, sample-request actor lists, array names, and
-    ``TransportConfig.run_id``. Fix: ``_NAME.fullmatch(...)`` (or ``\\Z`` instead of ``$``)."""
+    """Names are matched whole (``_NAME.fullmatch``): a pattern ending in ``$`` applied with
+    ``.match`` would also match before a final newline and let "w0\\n" pass every name check (key
+    builders, the actor in transitions headers, sample-request actor lists, array names and
+    ``TransportConfig.run_id``)."""
     with pytest.raises(ValueError):
         wire.transitions_key("run", "w0\n")
     with pytest.raises(ValueError):
@@ -667,9 +666,9 @@ def test_weights_arrays_rules():
 
 
 def test_weights_blob_must_be_uint8():
-    """BUG (minor): decode_weights checks only name and ndim of the blob, not its dtype, so a
-    float32 array whose bytes happen to form a safetensors file is accepted. The contract says
-    exactly one 1-D ``|u1`` array; fix: also require ``dtype.str == "|u1"`` (reason bad_arrays)."""
+    """The contract says exactly one 1-D ``|u1`` array: ``decode_weights`` checks the blob's dtype
+    too (reason bad_arrays), so a float32 array whose bytes happen to form a safetensors file is
+    refused."""
     blob = safetensors_dumps({"a": np.ones(2, np.float32)})
     assert len(blob) % 4 == 0
     as_f32 = np.frombuffer(blob, np.float32)
@@ -727,10 +726,10 @@ def test_safetensors_layout():
 
 
 def test_safetensors_zero_dim_tensor_keeps_its_shape():
-    """BUG: ``safetensors_dumps`` (and ``encode``) pass arrays through ``np.ascontiguousarray``,
-    which returns ndim >= 1, so a 0-d tensor is written with shape [1]. A torch state dict with a
-    0-d entry (e.g. BatchNorm's ``num_batches_tracked``) would then fail ``load_into``'s strict
-    shape check on every actor. Fix: ``np.ascontiguousarray(arr).reshape(arr.shape)``."""
+    """A 0-d tensor keeps shape ``()`` (``np.ascontiguousarray`` alone returns ndim >= 1, which would
+    write it with shape [1]). A torch state dict with a 0-d entry (e.g. BatchNorm's
+    ``num_batches_tracked``) would otherwise fail ``load_into``'s strict shape check on every env
+    worker."""
     t = {"scalar": np.array(2.0, np.float32)}
     assert stn.load(safetensors_dumps(t))["scalar"].shape == ()
     assert safetensors_loads(safetensors_dumps(t))[0]["scalar"].shape == ()
@@ -738,9 +737,8 @@ def test_safetensors_zero_dim_tensor_keeps_its_shape():
 
 
 def test_safetensors_unsigned_16_and_32_bit():
-    """BUG (minor): ``<u2``/``<u4`` are allowed on the wire but missing from ``_ST_DTYPES`` (U16/U32,
-    which the safetensors format and package support), so ``safetensors_dumps`` raises KeyError and
-    ``safetensors_loads`` refuses the package's U16/U32 tensors."""
+    """``<u2``/``<u4``, allowed on the wire, are written and read as safetensors U16/U32, which the
+    format and the safetensors package support (both directions checked against the package)."""
     t = {"a": np.array([1, 2], np.uint16), "b": np.array([3], np.uint32)}
     _assert_tensors_equal(stn.load(safetensors_dumps(t)), t)
     _assert_tensors_equal(safetensors_loads(stn.save(t))[0], t)
@@ -780,15 +778,15 @@ def test_corrupt_safetensors_refused(blob):
 
 @pytest.mark.parametrize("meta", [[1, 2], "ab", 5, [["a"]]])
 def test_safetensors_bad_metadata_is_a_wire_error(meta):
-    """BUG: ``safetensors_loads`` does ``dict(meta)`` on an unvalidated ``__metadata__``; a list,
-    string or number raises TypeError/ValueError instead of WireError("bad_weights")."""
+    """A ``__metadata__`` that is a list, string or number is WireError("bad_weights"), not the
+    TypeError/ValueError of ``dict(meta)``."""
     assert reason_of(safetensors_loads, _st({"__metadata__": meta})) == "bad_weights"
 
 
 @pytest.mark.parametrize("head", [b"[" * 5000, b'{"a":' + b"9" * 5000 + b"}"])
 def test_safetensors_pathological_header_is_a_wire_error(head):
-    """BUG: the safetensors header parse catches only UnicodeDecodeError/JSONDecodeError: deep
-    nesting raises RecursionError and a >4300-digit integer raises a plain ValueError."""
+    """Deep nesting (RecursionError) and a >4300-digit integer (a plain ValueError) in a safetensors
+    header are WireError("bad_weights") too, like undecodable or malformed JSON."""
     assert reason_of(safetensors_loads, _st(head)) == "bad_weights"
 
 
@@ -838,9 +836,9 @@ def test_batch_validation():
 
 
 def test_batch_with_scalar_action_is_a_wire_error():
-    """BUG: ``decode_batch`` reads ``msg.arrays["action"].shape[0]`` before any shape check; an
-    ``action`` of shape ``[]`` raises IndexError (the learner's ReplayClient.sample does not catch
-    it). Fix: require ``action.ndim == 1`` first (reason bad_shape)."""
+    """An ``action`` of shape ``[]`` is WireError("bad_shape"): ``decode_batch`` checks
+    ``action.ndim == 1`` before it reads the row count from it (an IndexError there would escape
+    the learner's ``ReplayClient.sample``, which catches only WireError)."""
     specs = [{"name": n, "dtype": "<i8", "shape": []} for n in wire._BATCH_FIELDS]
     assert reason_of(decode_batch, envelope(4, {"num_batches": 1, "arrays": specs}, b"\0" * 8 * len(specs)), SCHEMA) == "bad_shape"
 
@@ -852,9 +850,9 @@ def test_json_validation():
 
 
 def test_error_with_malformed_retry_after_is_a_wire_error():
-    """BUG (minor): ``decode_error`` does ``int(header["retry_after_ms"])`` unchecked: "soon" raises
-    ValueError and a list raises TypeError (the learner calls it via ``transport.query_ok`` without
-    a handler). Fix: ``_require(header, "retry_after_ms", int)`` or fall back to 0."""
+    """A ``retry_after_ms`` that is not an integer ("soon", a list) is a WireError, not the
+    ValueError/TypeError of ``int(...)``: the learner reads ERROR replies through
+    ``transport.query_ok``, which handles only WireError."""
     for bad in ("soon", [1]):
         with pytest.raises(WireError):
             decode_error(envelope(5, {"reason": "x", "detail": "", "retry_after_ms": bad, "arrays": []}))

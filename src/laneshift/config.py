@@ -188,7 +188,7 @@ class ReplayConfig:
     # many frames per item of capacity. About 1 new frame an item in steady state; when the ring
     # runs out first, the oldest items go early (stats: online.frames.evicted_for_frames).
     frames_per_item: float = 2.0
-    # Replay-server shards (issue 13's scale-out): each holds capacity / shards items (and its own
+    # Replay-server shards, to scale the replay out: each holds capacity / shards items (and its own
     # demo region in retention), each env worker sends to one (wire.shard_of: a stable function of
     # its name) and the learner samples across them in proportion to their sizes (learner/shards.py).
     shards: int = 1
@@ -420,7 +420,7 @@ class DeployConfig:
     # by Ray. "launcher": a zenoh session in the launcher's own process, local mode only. A local
     # run's Ray processes all die with its launcher, so there an actor adds no supervision worth
     # its process: a Ray worker holding one zenoh session cost about 106 MB of the run's 1.24 GB
-    # (issue 13, P8; docs/performance.md). "auto": the launcher in local mode, an actor on a cluster.
+    # peak memory (`laneshift bench run`; docs/performance.md). "auto": the launcher in local mode, an actor on a cluster.
     router_in: Literal["auto", "actor", "launcher"] = "auto"
     # The address the router listens on and every client connects to. "" = the address Ray
     # registered for the router's node (``ray start --node-ip-address``), 127.0.0.1 in local mode.
@@ -443,7 +443,8 @@ class DeployConfig:
     stall_timeout_s: float = 300.0
     # k >= 0: the learner's process runs on CPU k alone and every other component process of the
     # run on the node's other CPUs (os.sched_setaffinity), so the learner's update never waits for
-    # a core the env workers hold (issue 13, P1: +25 % env steps/s on 2 cores, docs/performance.md).
+    # a core the env workers hold (+25 % env steps/s on 2 cores: `laneshift bench run`, with
+    # --set deploy.learner_core=-1 and without; docs/performance.md).
     # -1: no pinning. -2 (auto, the default): local mode pins the learner to the machine's last CPU
     # when the launcher may use two or more; a cluster run pins nothing (``resolve_learner_core``).
     learner_core: int = -2

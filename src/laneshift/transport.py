@@ -218,7 +218,9 @@ def router_of(session: zenoh.Session) -> str:
         return "the zenoh router"
 
 
-# --------------------------------------------------------------------------- waiting lines (issue 14)
+# --------------------------------------------------------------------------- waiting lines
+# Every network wait says what it waits for (a peer not started, another run id, a router out of
+# reach), so a process that is waiting is never silent (tests/test_waiting_lines.py).
 
 #: A network wait this long says so in one line; that line repeats at most every WAIT_LINE_EVERY_S.
 WAIT_FIRST_LINE_S = 5.0

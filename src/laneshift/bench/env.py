@@ -24,19 +24,18 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from laneshift.argtypes import non_negative_int, positive_int
 from laneshift.progress import progress
 
 
 def register(subparsers: Any) -> None:
-    """Add the ``env`` sub-command (the lead's cli calls this under ``laneshift bench``)."""
+    """Add the ``env`` sub-command (``laneshift.cli`` calls this under ``laneshift bench``)."""
     p = subparsers.add_parser("env", help="env speed vs highway-fast-v0, and baseline policies")
     _add_arguments(p)
     p.set_defaults(func=run)
 
 
 def _add_arguments(p: argparse.ArgumentParser) -> None:
-    from laneshift.cli import non_negative_int, positive_int
-
     p.add_argument("--steps", type=positive_int, default=600, help="random-action steps per env (default 600)")
     p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the envs and the random actions")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")

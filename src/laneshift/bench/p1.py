@@ -1,4 +1,5 @@
-"""``laneshift bench p1``: a whole run's env steps/s against the bound its learner allows (P1).
+"""``laneshift bench p1``: a whole run's env steps/s against the bound its learner allows (the
+figure ``bench all`` reports as ``p1_*``; the target is at least 0.9 of the bound).
 
 At replay ratio R (``replay.samples_per_insert``) and batch B, a run can make at most
 ``bare updates/s x B / R`` env steps/s, where ``bare updates/s`` is a bare torch loop's rate with
@@ -9,7 +10,7 @@ bare, run, bare), and each run is set against the mean of the two measurements b
 
 A run's rate is read from its learner's ``metrics.jsonl`` (``bench run``): over the whole of
 training, and over its last two thirds (the steady state, past the replay's fill to min_size and
-the first weights' trip to the workers). Both fractions are reported; the steady one is P1.
+the first weights' trip to the workers). Both fractions are reported; the steady one is the figure.
 
     laneshift bench p1                               # 2 rounds of 40,000 env steps at ratio 32
     laneshift bench p1 --rounds 3 --json

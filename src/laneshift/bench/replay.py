@@ -71,7 +71,7 @@ class BenchError(RuntimeError):
 
 
 def register(subparsers: Any) -> None:
-    """Add the ``replay`` sub-command (the lead's cli calls this under ``laneshift bench``)."""
+    """Add the ``replay`` sub-command (``laneshift.cli`` calls this under ``laneshift bench``)."""
     p = subparsers.add_parser("replay", help="replay server ingest rate, sample latency, memory per transition")
     _add_arguments(p)
     p.set_defaults(func=run)

@@ -4,12 +4,23 @@ What it is: runs ``laneshift bench env | replay | learner | worker | shards | ru
 as its own process with ``--json`` (so one's memory or threads cannot colour the next), and the
 RLlib peer (``benchmarks/rllib_dqn.py`` in ``.venv-rllib``, built by ``make bench-rllib``) and the
 Reverb peer (``benchmarks/reverb_replay.py`` in ``.venv-reverb``, ``make bench-reverb``) when their
-venvs exist. Then it derives issue 13's figures from them: the learner against the bare
-loop (P5), env steps/s against the learner-bound (P1), peak memory (P8), start-up, and laneshift
-against RLlib and Reverb. Nothing is estimated: a figure whose benchmark did not run is ``null``
-with the reason. One thing is measured twice on purpose: the bare loop runs again right after the
-whole run (``bare_after_run``), and P1's bound is the mean of the two, because this machine's speed
-drifts between minutes (``bench p1`` does the same for each of its runs).
+venvs exist. Then it derives the performance targets' figures from them (``targets``; each key's
+prefix names its target, docs/performance.md lists where each stands):
+
+- ``p5_*``: the learner's update against a bare torch loop, updates/s (target: at least 0.9x);
+- ``p1_*``: a run's steady env steps/s against the most its learner allows (the bound: the bare
+  loop's updates/s x batch / replay ratio; target: at least 0.9 of it);
+- ``p8_*``: a run's peak memory, the process tree's RSS and PSS (target: at most 1.2 GB RSS);
+- ``startup_first_stored_s``: seconds from the command to the first transition stored (target: at
+  most 5 s);
+- ``p2_*``: replay ingest, transitions/s (target: 1M/s); ``p7_shards``: ingest and sample latency
+  by replay shard count (docs/scaling.md);
+- ``vs_rllib_*``, ``vs_reverb_*``, ``reverb_*``: laneshift against RLlib's DQN and Reverb.
+
+Nothing is estimated: a figure whose benchmark did not run is ``null`` with the reason. One thing
+is measured twice on purpose: the bare loop runs again right after the whole run
+(``bare_after_run``), and the p1 bound is the mean of the two, because this machine's speed drifts
+between minutes (``bench p1`` does the same for each of its runs).
 May import: the contract and ``deploy``.
 
     laneshift bench all --out docs/results/bench-all.json      # about 10 minutes here
@@ -79,11 +90,11 @@ def _peer(name: str, venv: str, script: str, args: list[str], why_venv: str, tim
 BATCH = 256
 
 
-#: A P1 figure says something only when the bare loop measured before and after its run agree
-#: within this: P1's own margin is 10 % (0.9 of the bound), and on the 2-core VM these benchmarks
-#: were written on the bare loop once measured 138.5 and 220.6 updates/s a minute apart
-#: (docs/performance.md, ninth sitting). A round beyond it is reported, flagged, and left out of
-#: ``bench p1``'s resolved summary.
+#: A p1 figure (a run against its learner's bound) says something only when the bare loop measured
+#: before and after its run agree within this: the target's own margin is 10 % (0.9 of the bound),
+#: and on the 2-core VM these benchmarks were written on the bare loop once measured 138.5 updates/s
+#: just before a run and 220.6 right after it (`laneshift bench p1` shows both; docs/performance.md).
+#: A round beyond it is reported, flagged, and left out of ``bench p1``'s resolved summary.
 MAX_BARE_DRIFT = 0.10
 
 
@@ -95,7 +106,7 @@ def bare_drift(before: float | None, after: float | None) -> float | None:
 
 
 def learner_bound(before: float, after: float | None, ratio: float) -> float:
-    """P1's bound: the env steps/s a run at replay ratio ``ratio`` can make at most, from the bare
+    """The p1 bound: the env steps/s a run at replay ratio ``ratio`` can make at most, from the bare
     loop's updates/s measured before it and, if that ran, after it (their mean: the machine drifts
     between minutes), times the batch over the ratio."""
     bare = (before + after) / 2 if after else before
@@ -140,7 +151,8 @@ def _ratio(shard_rows: list | None, theirs: float | None) -> float | None:
 
 
 def derive(r: dict) -> dict:
-    """Issue 13's figures from the benchmarks' own outputs (null where one did not run)."""
+    """The targets' figures (the module's text lists them) from the benchmarks' own outputs (null
+    where one did not run)."""
     learner = _mlp_case(r["learner"])
     bare = _get(learner, "bare", "updates_per_s")
     after = _get(r, "bare_after_run", "updates_per_s")
@@ -149,7 +161,7 @@ def derive(r: dict) -> dict:
     bound = learner_bound(bare, after, ratio=ReplayConfig().samples_per_insert) if bare else None
     drift = bare_drift(bare, after)
     ours = run.get("training_env_steps_per_s")  # the whole of training, as RLlib's figure is read
-    steady = run.get("steady_env_steps_per_s")  # its last two thirds: P1 (bench p1 repeats it in rounds)
+    steady = run.get("steady_env_steps_per_s")  # its last two thirds: p1's (bench p1 repeats it in rounds)
     theirs = peer.get("env_steps_per_s") if isinstance(peer, dict) else None
     return {
         "p5_learner_over_bare": round(learner["learner_over_bare"], 2) if learner.get("learner_over_bare") else None,
@@ -170,7 +182,7 @@ def derive(r: dict) -> dict:
         "vs_reverb_ingest": _ratio(_get(r, "shards", "rows"), _get(r, "peers", "reverb", "ingest_per_s")),
         "reverb_ingest_per_s": _get(r, "peers", "reverb", "ingest_per_s"),
         "reverb_sample_p99_idle_ms": _get(r, "peers", "reverb", "sample_idle", "p99_ms"),
-        # P7: ingest and sample latency by shard count (docs/scaling.md).
+        # Ingest and sample latency by shard count (docs/scaling.md).
         "p7_shards": [{k: row.get(k) for k in ("shards", "ingest_per_s", "server_cpu_us_per_transition")}
                       | {"sample_p99_idle_ms": _get(row, "sample_idle", "p99_ms"),
                          "sample_p99_under_ingest_ms": _get(row, "sample_under_ingest", "p99_ms"),
@@ -194,12 +206,13 @@ def bench_all(quick: bool) -> dict:
     result["worker"] = _bench("worker", ["--steps", "4000" if quick else "8000"], 600)
     result["shards"] = _bench("shards", ["--shards", "1,2,4", "--duration", seconds,
                                          "--capacity", "100000" if quick else "400000"], 900)
-    # P2's 1M/s: one shard fed 1,024 transitions per message (a vectorised actor's send), the
-    # size at which this machine's 2 cores reach it (32 per message: the p7 rows above).
+    # The ingest target, 1M transitions/s (p2): one shard fed 1,024 transitions per message (a
+    # vectorised actor's send), the size at which this machine's 2 cores reach it (32 per message:
+    # the p7 rows above).
     result["ingest_1024"] = _bench("shards", ["--shards", "1", "--batch", "1024", "--duration", seconds,
                                               "--capacity", "500000" if quick else "2000000"], 900)
     result["run"] = _bench("run", ["--train-args", RUN_ARGS.format(steps=steps)], 900)
-    # The bare loop again right after the run, as `bench p1` does: P1's bound is the mean of the two.
+    # The bare loop again right after the run, as `bench p1` does: the p1 bound is the mean of the two.
     result["bare_after_run"] = {"updates_per_s": bare_updates_per_s(float(seconds))}
     result["peers"] = {"rllib": _rllib(steps // 2, 1800),
                        "reverb": _reverb(seconds, "100000" if quick else "400000", 900)}
@@ -217,7 +230,8 @@ def bench_all_main(args: argparse.Namespace) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("all", help="every benchmark and the RLlib peer, as one JSON object with issue 13's figures",
+    p = sub.add_parser("all", help="every benchmark and the RLlib peer, as one JSON object with the "
+                                   "performance targets' figures",
                        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("--quick", action="store_true", help="shorter windows and runs (about 4 minutes instead of 10)")
     p.add_argument("--out", help="also write the JSON to this file")

@@ -5,7 +5,7 @@ epsilon-greedily with a learner-shaped network and encoding every batch it sends
 core; its links only count what it sends (nothing downstream is measured: the replay server and
 the learner have their own benchmarks). Several envs per worker share one batched forward pass
 per step, which is what the 4 and 16 rows show.
-May import: the contract and ``deploy``.
+May import: the contract, ``deploy`` and the argparse types (``laneshift.argtypes``).
 
     laneshift bench worker --envs 1,4,16 --steps 4000 --json
 """
@@ -19,6 +19,7 @@ import sys
 import time
 
 from laneshift import wire
+from laneshift.argtypes import positive_int
 
 
 class CountingLinks:
@@ -99,8 +100,6 @@ def register(sub: argparse._SubParsersAction) -> None:
                        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("--scenario", default="straight", help="env.scenario of the worker's envs")
     p.add_argument("--envs", default="1,4,16", help="envs per worker to measure, comma-separated")
-    from laneshift.cli import positive_int
-
     p.add_argument("--steps", type=positive_int, default=4000, help="env steps per measurement (over all of the worker's envs)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=bench_worker_main)

@@ -1,7 +1,7 @@
 """``laneshift demos ...`` sub-commands: generate, record, inspect.
 
-The lead's CLI calls :func:`register` on the ``demos`` sub-parsers; each sub-command sets
-``func(args) -> int``. Standalone: ``python -m laneshift.demos.cli generate ...``.
+The ``laneshift`` command (``laneshift.cli``) calls :func:`register` on the ``demos`` sub-parsers;
+each sub-command sets ``func(args) -> int``. Standalone: ``python -m laneshift.demos.cli generate ...``.
 
 Example::
 
@@ -22,7 +22,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ..cli import non_negative_float, non_negative_int, positive_float, positive_int
+from ..argtypes import non_negative_float, non_negative_int, positive_float, positive_int
 from .humanlike import DEFAULT_ACTION_NOISE, DEFAULT_REACTION_STEPS
 from .shard import ShardError
 

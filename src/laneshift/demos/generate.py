@@ -9,7 +9,10 @@ action index. A fresh driver is made for every episode, so drivers need no reset
 Episode ``i`` is reset with seed ``seed + i`` (and the action space seeded with ``seed``), so
 the same arguments give the same shard, checksum included.
 
-Imports: numpy, gymnasium, the demos package; laneshift's demonstrators lazily.
+The drivers and the episode loop are in ``drivers`` (shared with ``humanlike``).
+
+Imports: laneshift.progress and the demos package (``drivers``, which imports laneshift's
+demonstrators lazily; ``humanlike``, ``envsupport``, ``writer``).
 
 Example::
 
@@ -25,67 +28,21 @@ from __future__ import annotations
 import inspect
 import os
 import time
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any
-
-import gymnasium as gym
-import numpy as np
 
 from ..progress import progress as progress_bar
+from .drivers import Driver, PolicyFactory, run_episode, scripted_driver
 from .envsupport import make_env, resolve_env_id
+from .humanlike import DEFAULT_ACTION_NOISE, DEFAULT_REACTION_STEPS, HumanLikePolicy
 from .writer import check_out_dir, write_shard
 
 POLICIES = ("scripted", "human-like")
-
-Driver = Callable[[Any], Any]  # observation -> action index
-PolicyFactory = Callable[[gym.Env], Driver]  # env -> driver, like ScriptedDriver(env)
-
-
-def scripted_driver(env: gym.Env) -> Driver:
-    """laneshift's scripted expert for ``env``: ScriptedDriver for the lane-change scenarios,
-    LKAExpert for lane keeping (imported lazily: they live with the envs)."""
-    try:
-        from laneshift.actors.envs.demonstrator import LKAExpert, ScriptedDriver
-        from laneshift.actors.envs.lka import LaneKeepingAssistEnv
-    except ImportError as exc:
-        raise ValueError(f"policy 'scripted' needs laneshift.actors.envs.demonstrator: {exc}") from exc
-    if isinstance(env.unwrapped, LaneKeepingAssistEnv):
-        return LKAExpert(env)
-    return ScriptedDriver(env)  # refuses, with a clear message, envs it cannot drive
 
 
 def _driver_name(policy: PolicyFactory, driver: Driver) -> str:
     """The driver's class (e.g. ``...ScriptedDriver``), or the policy's name for plain functions."""
     named = policy if inspect.isfunction(driver) or inspect.ismethod(driver) else type(driver)
     return f"{getattr(named, '__module__', '?')}.{getattr(named, '__qualname__', repr(named))}"
-
-
-def run_episode(env: gym.Env, driver: Driver, seed: int | None) -> dict[str, Any]:
-    """Drive one episode to its end and return it in :func:`write_shard`'s episode format."""
-    obs, info = env.reset(seed=seed)
-    # Copies: highway-env returns the same (mutated) array object every step.
-    observations = [np.array(obs, copy=True)]
-    actions, rewards, terminations, truncations, infos = [], [], [], [], [info]
-    while True:
-        action = int(driver(obs))
-        obs, reward, terminated, truncated, info = env.step(action)
-        observations.append(np.array(obs, copy=True))
-        actions.append(action)
-        rewards.append(float(reward))
-        terminations.append(bool(terminated))
-        truncations.append(bool(truncated))
-        infos.append(info)
-        if terminated or truncated:
-            break
-    return {
-        "observations": np.stack(observations),
-        "actions": np.asarray(actions, np.int64),
-        "rewards": np.asarray(rewards, np.float64),
-        "terminations": np.asarray(terminations, bool),
-        "truncations": np.asarray(truncations, bool),
-        "infos": infos,
-    }
 
 
 def generate_shard(
@@ -118,10 +75,6 @@ def generate_shard(
     if policy != "human-like" and (reaction_steps is not None or action_noise is not None):
         raise ValueError("reaction_steps / action_noise are parameters of policy 'human-like'")
     check_out_dir(out_dir)  # fail before driving, not after
-    # Imported here, not at the top: `python -m laneshift.demos.humanlike` (the calibration)
-    # must not find its module already imported by the package.
-    from .humanlike import DEFAULT_ACTION_NOISE, DEFAULT_REACTION_STEPS, HumanLikePolicy
-
     recorded_by, driver_kind, extra = "scripted", "scripted", {}
     human_like: HumanLikePolicy | None = None
     if isinstance(policy, str):

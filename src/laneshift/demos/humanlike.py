@@ -18,7 +18,8 @@ so the same command writes the same shard (same sha256). Shards written with it 
 The defaults were calibrated with :func:`calibrate` (``python -m laneshift.demos.humanlike``,
 table in ``docs/demos.md``) to land near the paper's human row.
 
-Imports: numpy, gymnasium, and laneshift's demonstrators (lazily, through ``.generate``).
+Imports: numpy, gymnasium, and the demos package's ``drivers`` (laneshift's demonstrators, lazily),
+``envsupport`` and ``outcomes``; never ``generate``, which imports this module.
 
 Example::
 
@@ -41,6 +42,10 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from .drivers import Driver, run_episode, scripted_driver
+from .envsupport import make_env, resolve_env_id
+from .outcomes import episode_outcome, outcome_rates
+
 # Calibrated on the straight scenario with its defaults (docs/demos.md, "calibration"): the
 # setting whose survival / achievement over 200 episodes (seeds 0..199) came closest to Table
 # 2's human row: 54.0 % / 48.0 % against 50.7 % / 50.3 %. Survival falls steeply between k = 3
@@ -52,8 +57,6 @@ PAPER_HUMAN = (50.7, 50.3)
 # Salt of the per-episode noise generator, so the noise stream is not the env's own seed stream.
 NOISE_SALT = 0x68756D61  # "huma"
 STAND_IN_PREFIX = "human-like stand-in"
-
-Driver = Callable[[Any], Any]
 
 
 def stand_in_label(reaction_steps: int, action_noise: float) -> str:
@@ -130,12 +133,7 @@ class HumanLikePolicy:
         return stand_in_label(self.reaction_steps, self.action_noise)
 
     def __call__(self, env: gym.Env) -> HumanLikeDriver:
-        if self.inner is None:
-            from .generate import scripted_driver  # import cycle: generate imports this module
-
-            inner = scripted_driver(env)
-        else:
-            inner = self.inner(env)
+        inner = scripted_driver(env) if self.inner is None else self.inner(env)
         episode_seed = self.seed + self._made
         self._made += 1
         if not isinstance(env.action_space, gym.spaces.Discrete):
@@ -162,10 +160,6 @@ def measure(env_id_or_scenario: str, env_kwargs: dict, episodes: int, seed: int,
 
     Drives exactly as ``generate_shard`` does (same seeds, same drivers), without storing.
     """
-    from .envsupport import make_env, resolve_env_id
-    from .generate import run_episode
-    from .outcomes import episode_outcome, outcome_rates
-
     env = make_env(resolve_env_id(env_id_or_scenario), env_kwargs)
     try:
         env.action_space.seed(seed)

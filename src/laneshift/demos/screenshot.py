@@ -46,7 +46,7 @@ def save_record_window(png: str | os.PathLike, *, scenario: str = "straight",
     os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
     import pygame
 
-    from .generate import scripted_driver
+    from .drivers import scripted_driver
     from .record import KeyboardSession
 
     png = Path(png)

@@ -3,7 +3,8 @@
 A run trained with ``--set learner.keep_checkpoints=true`` keeps ``checkpoints/u<updates>.safetensors``
 every ``learner.checkpoint_every`` updates, each with the env steps and seconds of training it
 had behind it. This evaluates each one on the same greedy episodes, so the output answers "how
-many env steps / how much wall time until X % achievement" (the issue's 80 % question) and shows
+many env steps / how much wall time until X % achievement" (e.g. 80 %, as the protocol's table
+reports) and shows
 where the policy peaked, and picks the validation-selected checkpoint (:func:`select_best`).
 
     laneshift experiment checkpoints --run-dir runs/exp/dqfd-s0 --episodes 50 --copy-best best.safetensors
@@ -19,6 +20,7 @@ import shutil
 import sys
 from pathlib import Path
 
+from laneshift.argtypes import comma_list, non_negative_int, positive_int
 from laneshift.config import ConfigError, EnvConfig, load_run_config
 from laneshift.studies.evaluate import INITIAL_LANES, evaluate_lanes, load_checkpoint_policy
 from laneshift.progress import progress
@@ -121,8 +123,6 @@ def _lane(text: str) -> str:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from laneshift.cli import comma_list, non_negative_int, positive_int
-
     p = subparsers.add_parser("checkpoints", help="greedy scores of every kept checkpoint of a run")
     p.add_argument("--run-dir", required=True, help="a run trained with --set learner.keep_checkpoints=true")
     p.add_argument("--episodes", type=positive_int, default=50, help="greedy episodes per checkpoint and initial lane")

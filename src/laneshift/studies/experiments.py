@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from laneshift.argtypes import add_set_arg, parse_set, positive_int
 from laneshift.config import METHODS, ConfigError, EnvConfig, RunConfig, load_run_config, method_settings  # noqa: F401
 from laneshift.studies.evaluate import INITIAL_LANES, evaluate_lanes, load_greedy_policy, wilson_ci95
 from laneshift.progress import progress, write
@@ -115,8 +116,6 @@ def human_like_lanes(env_cfg: EnvConfig, episodes: int, seed: int) -> dict[str, 
 
 
 def run_compare(args: argparse.Namespace) -> dict:
-    from laneshift.cli import parse_set
-
     user = parse_set(args.set)
     base = load_run_config(args.config, {"env.scenario": args.scenario, "actor.workers": args.workers, **user})
     methods, seeds = _names(args.methods), _seed_list(args.seeds)
@@ -610,8 +609,6 @@ def run_replot(args: argparse.Namespace) -> int:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from laneshift.cli import add_set_arg, positive_int
-
     p = subparsers.add_parser("compare", help="train and evaluate methods x seeds (the paper's Table 2)")
     p.add_argument("--scenario", default="straight", help="straight | merge | curve | roundabout")
     p.add_argument("--methods", default="none,retention,rehearsal,dqfd", help=f"comma separated: {', '.join(METHODS)}")

@@ -191,7 +191,7 @@ def plan(args: argparse.Namespace) -> tuple[Path, str, dict[int, RunConfig], dic
     """(out dir, road, each seed's config, each seed's state): every config is built (and a bad
     method, seed or --set refused) before the first run starts. A seed whose run stopped unfinished
     gets its saved config with this command's settings on top (as ``laneshift train --resume``)."""
-    from laneshift.cli import parse_set
+    from laneshift.argtypes import parse_set
 
     user = parse_set(args.set)
     method_settings(args.method, "--method")
@@ -471,7 +471,7 @@ def run_protocol(args: argparse.Namespace) -> dict:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from laneshift.cli import add_set_arg, fraction, non_negative_int, positive_int
+    from laneshift.argtypes import add_set_arg, fraction, non_negative_int, positive_int
 
     p = subparsers.add_parser("protocol", help="the whole evaluation protocol for one method on one road: "
                                                "train seeds, test the final networks, baselines, table, publish")

@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from laneshift.argtypes import add_set_arg, comma_list, non_negative_int, parse_set, positive_int
 from laneshift.config import ConfigError, load_run_config
 from laneshift.progress import progress, write
 
@@ -42,7 +43,6 @@ def preset_overrides(preset: int) -> dict[str, Any]:
 
 
 def run_presets(args: argparse.Namespace) -> dict:
-    from laneshift.cli import parse_set
     from laneshift.studies.evaluate import evaluate_checkpoint
     from laneshift.studies.experiments import _episode_curves, train_logged
 
@@ -135,8 +135,6 @@ def plot(returns_by_run: dict[str, np.ndarray], scenarios: list[str], presets: l
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from laneshift.cli import add_set_arg, comma_list, non_negative_int, positive_int
-
     p = subparsers.add_parser("presets", help="reward conditions 1-5 on merge/curve/roundabout (figure 4)")
     p.add_argument("--scenarios", default="merge,curve,roundabout", help="comma-separated scenarios")
     p.add_argument("--presets", type=comma_list(positive_int, "reward conditions 1-5"), default=[1, 2, 3, 4, 5],

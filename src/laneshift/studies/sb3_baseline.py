@@ -20,6 +20,7 @@ import json
 import time
 from pathlib import Path
 
+from laneshift.argtypes import fraction, non_negative_int, positive_int
 from laneshift.config import EnvConfig
 from laneshift.actors.envs import make as make_env
 from laneshift.studies.evaluate import INITIAL_LANES, evaluate_lanes
@@ -99,8 +100,6 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from laneshift.cli import fraction, non_negative_int, positive_int
-
     p = subparsers.add_parser("sb3", help="stable-baselines3 DQN on the same env (single-process baseline)")
     p.add_argument("--scenario", default="straight", help="straight | merge | curve | roundabout | lka")
     p.add_argument("--env-steps", type=positive_int, default=150_000, help="env-step budget of the run")

@@ -1,0 +1,80 @@
+"""The learner's seams (Acme style): what the same Learner needs from the world, over zenoh or
+in-process alike. Types only (and one forwarding helper); the zenoh adapters are in ``links``,
+the sharded replay in ``shards``, and both import this module.
+
+- ``ReplayClient``: ``sample(SampleRequest)`` -> SampledBatch, a WireError (not ready / rate
+  limited) or None; ``send_priorities(bytes)``; ``replay_stats()`` / ``replay_control(body)``
+  (one replay server: ``links.ZenohReplayShard``; several: ``shards.ShardedReplay`` over one
+  each, a ``ReplayShardClient``, which can also send a request before waiting for it:
+  ``request_sample``, returning a ``PendingSample``);
+- ``WeightsPublisher``: ``publish_weights(bytes)`` (safetensors with a version, ``laneshift.qnet``);
+- ``RunChannel``: ``take_episodes()`` (the workers' episode records, as sent: the learner
+  validates and counts them), ``publish_stats(bytes)``, ``stop_requested()``, ``stop_all()``;
+- ``LearnerLinks``: all three as one object; ``ReplayThrough``: the ``ReplayClient`` half of a
+  LearnerLinks, forwarded to its ``replay``.
+
+Room: learner (component). May import: the contract; never another component.
+"""
+
+from __future__ import annotations
+
+from typing import Callable, Protocol
+
+from laneshift import wire
+
+# A sample request already sent: calling it waits for the reply (``ReplayShardClient.request_sample``).
+PendingSample = Callable[[], "wire.SampledBatch | wire.WireError | None"]
+
+
+class ReplayClient(Protocol):
+    """The replay server, as the learner uses it."""
+
+    def sample(self, req: wire.SampleRequest) -> wire.SampledBatch | wire.WireError | None: ...
+    def send_priorities(self, payload: bytes) -> None: ...
+    def replay_stats(self) -> dict | None: ...
+    def replay_control(self, body: dict) -> dict | None: ...
+
+
+class ReplayShardClient(ReplayClient, Protocol):
+    """One replay server of several: ``request_sample`` sends the request and returns the call
+    that waits for its reply, so ``ShardedReplay`` asks every shard before it waits for any."""
+
+    def request_sample(self, req: wire.SampleRequest) -> PendingSample: ...
+
+
+class WeightsPublisher(Protocol):
+    """The weights broadcast to the env workers."""
+
+    def publish_weights(self, payload: bytes) -> None: ...
+
+
+class RunChannel(Protocol):
+    """Episode records in, the learner's stats out, and the run's stop."""
+
+    def take_episodes(self) -> list[bytes]: ...
+    def publish_stats(self, payload: bytes) -> None: ...
+    def stop_requested(self) -> bool: ...
+    def stop_all(self) -> None: ...
+
+
+class LearnerLinks(ReplayClient, WeightsPublisher, RunChannel, Protocol):
+    """All three seams, as one object (what the builder hands the learner)."""
+
+
+class ReplayThrough:
+    """The ``ReplayClient`` half of a LearnerLinks, handed on to ``self.replay``: one replay
+    server's client, or ``ShardedReplay`` over one per shard (zenoh and in-process links alike)."""
+
+    replay: ReplayClient
+
+    def sample(self, req: wire.SampleRequest) -> wire.SampledBatch | wire.WireError | None:
+        return self.replay.sample(req)
+
+    def replay_stats(self) -> dict | None:
+        return self.replay.replay_stats()
+
+    def replay_control(self, body: dict) -> dict | None:
+        return self.replay.replay_control(body)
+
+    def send_priorities(self, payload: bytes) -> None:
+        self.replay.send_priorities(payload)
