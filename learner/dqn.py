@@ -318,7 +318,7 @@ class DoubleDQN:
                 # Supervised imitation: cross-entropy of softmax(Q(s, .)) against the demonstrator's
                 # action on demo rows. Unlike the margin (a fixed 0.8 at Q-values near 100), it keeps
                 # pushing until the demo action clearly leads, which is what makes the small action
-                # gaps of 10 Hz control follow the demonstrator (docs/RESULTS.md).
+                # gaps of 10 Hz control follow the demonstrator (docs/results-history.md, round 2).
                 bc_loss = F.cross_entropy(qd, ad)
                 loss = loss + cfg.bc_loss_weight * bc_loss
 

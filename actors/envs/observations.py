@@ -17,7 +17,7 @@ lanes (current, left neighbour, right neighbour; a missing neighbour is all zero
     vehicle within 100 m: gap 100 m, speed difference 0. The same facts are in the vehicle blocks
     below, but there the network must work out from positions which car shares which lane; handed
     over per lane they make the scripted driver much easier to imitate (the ablation with
-    ``lane_features=False`` is in docs/RESULTS.md).
+    ``lane_features=False`` is in docs/results-history.md, round 2).
 other vehicles (the K nearest within 60 m, nearest first; absent slots are all zero)
     presence; dx, dy / 50 m (dx forward, dy left); dvx, dvy / 10 m/s (relative velocity in the
     observer's frame); sin of the relative heading (+ = pointing left of the observer); lane

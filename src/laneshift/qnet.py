@@ -15,7 +15,7 @@ Why dueling here: at 10 decisions per second one action changes little of a 10-s
 so the Q-values of the 9 actions differ by a tiny fraction of their size. A separate value
 stream lets the advantage head spend its capacity on those small differences; pre-trained on
 the scripted demos it chose the demonstrator's action more often and survived more
-(docs/RESULTS.md).
+(docs/results-history.md, round 2).
 
 Weights travel and rest as safetensors (``wire.encode_weights`` with a version; checkpoints are
 plain safetensors files that ``safetensors.torch.load_file`` reads): ``to_wire``, ``load_into``
