@@ -35,7 +35,7 @@ import json
 import re
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 import numpy as np
 
@@ -362,6 +362,16 @@ def _moving_average(x: np.ndarray, window: int) -> np.ndarray:
 EPISODES_FILE = "episodes.json"
 
 
+def metrics_records(path: Path) -> Iterator[dict]:
+    """The records of a run's ``metrics.jsonl``, in order; a line cut short by a killed run is skipped."""
+    with open(path) as f:
+        for line in f:
+            try:
+                yield json.loads(line)
+            except ValueError:
+                continue
+
+
 def run_episodes(run_dir: str | Path) -> dict | None:
     """A run's episodes from its ``metrics.jsonl``: ``time_s`` (since the run's first record, so a
     pre-training phase counts), ``env_steps`` (None if a record lacks it: logs written before
@@ -370,20 +380,15 @@ def run_episodes(run_dir: str | Path) -> dict | None:
     if not path.is_file():
         return None
     t0, t, steps, ret, length, evals = None, [], [], [], [], []
-    with open(path) as f:
-        for line in f:
-            try:
-                rec = json.loads(line)
-            except ValueError:  # a line cut short by a killed run
-                continue
-            t0 = rec.get("time") if t0 is None else t0
-            if rec.get("kind") == "episode":
-                t.append(rec["time"] - t0)
-                steps.append(rec.get("env_steps"))
-                ret.append(rec["return"])
-                length.append(rec["length"])
-            elif rec.get("kind") == "eval" and rec.get("env_steps") is not None:  # train.eval_every
-                evals.append({k: rec[k] for k in EVAL_FIELDS})
+    for rec in metrics_records(path):
+        t0 = rec.get("time") if t0 is None else t0
+        if rec.get("kind") == "episode":
+            t.append(rec["time"] - t0)
+            steps.append(rec.get("env_steps"))
+            ret.append(rec["return"])
+            length.append(rec["length"])
+        elif rec.get("kind") == "eval" and rec.get("env_steps") is not None:  # train.eval_every
+            evals.append({k: rec[k] for k in EVAL_FIELDS})
     return {"time_s": t, "env_steps": None if None in steps else steps, "return": ret, "length": length,
             "evals": evals}
 

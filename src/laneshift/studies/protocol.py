@@ -48,7 +48,7 @@ from laneshift.config import METHODS, ConfigError, EnvConfig, RunConfig, load_ru
 from laneshift.progress import progress, write
 from laneshift.studies.evaluate import INITIAL_LANES, evaluate_lanes, load_greedy_policy
 from laneshift.studies.experiments import (HUMAN_LIKE_ROW, _lane_stats, _seed_list, across_seeds, human_like_lanes,
-                                           method_config, plot_eval_curves, pooled, train_logged)
+                                           method_config, metrics_records, plot_eval_curves, pooled, train_logged)
 from laneshift.studies.stats import RESAMPLES
 
 #: The test episodes: episode i of each initial-lane setting is reset with seed TEST_SEED + i.
@@ -98,21 +98,16 @@ def validation_curve(run_dir: str | Path) -> list[dict]:
     if not path.is_file():
         return []
     t0, curve = None, []
-    with open(path) as f:
-        for line in f:
-            try:
-                rec = json.loads(line)
-            except ValueError:  # a line cut short by a killed run
-                continue
-            if t0 is None and rec.get("time") is not None:
-                t0 = rec["time"]
-            if rec.get("kind") != "eval" or rec.get("env_steps") is None:
-                continue
-            elapsed = rec.get("elapsed_s")
-            if elapsed is None and rec.get("time") is not None and t0 is not None:
-                elapsed = round(rec["time"] - t0, 1)
-            curve.append({"env_steps": rec["env_steps"], "elapsed_s": elapsed, "episodes": rec.get("episodes"),
-                          "survival_rate": rec.get("survival_rate"), "achievement_rate": rec.get("achievement_rate")})
+    for rec in metrics_records(path):
+        if t0 is None and rec.get("time") is not None:
+            t0 = rec["time"]
+        if rec.get("kind") != "eval" or rec.get("env_steps") is None:
+            continue
+        elapsed = rec.get("elapsed_s")
+        if elapsed is None and rec.get("time") is not None and t0 is not None:
+            elapsed = round(rec["time"] - t0, 1)
+        curve.append({"env_steps": rec["env_steps"], "elapsed_s": elapsed, "episodes": rec.get("episodes"),
+                      "survival_rate": rec.get("survival_rate"), "achievement_rate": rec.get("achievement_rate")})
     return curve
 
 
