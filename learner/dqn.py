@@ -181,8 +181,11 @@ class DoubleDQN:
         # computed as the update used to (torch.pow in float32), looked up per row in numpy: one
         # operation instead of two dtype conversions, a pow and a product per update.
         k = torch.arange(256, dtype=torch.float32)
-        table = torch.stack([torch.pow(cfg.gamma, k), torch.zeros(256)], dim=1)  # [steps, terminated != 0]
-        self._discount_table = table.numpy()
+        powers, zeros = torch.pow(cfg.gamma, k), torch.zeros(256)
+        self._discount_table = torch.stack([powers, zeros], dim=1).numpy()  # [steps, terminated != 0]
+        # learner.terminal_value bootstrapped after a terminal step, by the same lookup: gamma ** steps
+        # * terminal_value where the row ended its episode, 0 where it did not.
+        self._terminal_table = torch.stack([zeros, powers * cfg.terminal_value], dim=1).numpy()
         self.updates = 0
         self._last: _UpdateRecord | None = None
         self.reset_optimizer()
@@ -264,11 +267,10 @@ class DoubleDQN:
 
     def _terminal_value(self, steps: Any, terminated: Any) -> torch.Tensor:
         """``learner.terminal_value`` discounted to each row that ended its episode (a crash, leaving
-        the road), 0 elsewhere: gamma ** steps * terminal_value * terminated."""
-        dev = self.device
-        done = torch.as_tensor(np.asarray(terminated) != 0, dtype=torch.float32, device=dev)
-        powers = torch.pow(self.cfg.gamma, torch.as_tensor(np.asarray(steps), dtype=torch.float32, device=dev))
-        return powers * done * self.cfg.terminal_value
+        the road), 0 elsewhere: one lookup in ``_terminal_table``, as ``_discount`` does."""
+        done = (np.asarray(terminated) != 0).view(np.uint8)
+        rows = self._terminal_table[np.asarray(steps).astype(np.intp, copy=False), done]
+        return _tensor(rows, torch.float32, self.device)
 
     def update(self, batch: Mapping[str, np.ndarray]) -> UpdateMetrics:
         cfg, dev = self.cfg, self.device
