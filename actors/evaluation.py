@@ -80,10 +80,9 @@ def evaluate_policy(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig
         raise ValueError(f"episodes must be >= 1, not {episodes}")
     env = make_env(env_cfg) if recorder is None else make_env(env_cfg, render_mode="rgb_array")
     policy = make_policy(env)
-    batch = getattr(policy, "batch", None)  # a network's policy (GreedyPolicy); scripted drivers have none
-    if batch is not None and getattr(env_cfg, "policy_vehicles", 0):
+    if isinstance(policy, GreedyPolicy) and env_cfg.policy_vehicles:
         # The paper's third kind of vehicle: traffic driven by a copy of the model under test.
-        env.unwrapped.set_npc_policy(batch)
+        env.unwrapped.set_npc_policy(policy.batch)
     returns, lengths, survived, achieved = [], [], 0, 0
     # How the lane-change episodes that crashed ended: "collision" or "offroad", by starting lane.
     crashes: dict[str, dict[str, int]] = {}
@@ -137,7 +136,7 @@ def evaluate_lanes(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig,
 class GreedyPolicy:
     """A network's greedy policy: ``policy(obs) -> action`` for the ego vehicle, and ``batch`` (rows
     of observations -> actions) for the policy vehicles of ``env.policy_vehicles``, which
-    :func:`evaluate_policy` drives with the same network (any policy with a ``batch`` does)."""
+    :func:`evaluate_policy` drives with the same network (scripted drivers leave them as they are)."""
 
     def __init__(self, batch: Callable[[np.ndarray], np.ndarray]):
         self.batch = batch

@@ -118,10 +118,10 @@ class Builder:
         t = self.cfg.train
         if not t.eval_every:
             return None
-        from laneshift.actors.evaluation import evaluate_policy
+        from laneshift.actors.evaluation import GreedyPolicy, evaluate_policy
 
         env_cfg, episodes, seed = self.cfg.env, t.periodic_eval_episodes, t.validation_seed
-        return lambda greedy: evaluate_policy(lambda env: greedy, env_cfg, episodes, seed=seed)
+        return lambda batch: evaluate_policy(lambda env: GreedyPolicy(batch), env_cfg, episodes, seed=seed)
 
     def learner_links(self, session, stop: threading.Event):
         from laneshift.learner.links import ZenohLearnerLinks

@@ -7,8 +7,8 @@ evaluation that runs during training.
   steps). Other tools read ``kind``, ``env_steps``, ``updates`` and ``time`` from these lines.
   At the end of a run ``hparams`` writes the resolved config (``section.field``) with final
   metrics for TensorBoard's HParams dashboard, in ``<run dir>/tb/hparams``.
-- ``GreedyEval``: ``train.eval_every`` / ``train.periodic_eval_episodes``: a copy of the online
-  network played greedily on a background thread, by the ``EvaluatePolicy`` the builder hands
+- ``GreedyEval``: ``train.eval_every`` / ``train.periodic_eval_episodes``: a copy of the network
+  the run hands out (``DoubleDQN.policy_net``) played greedily on a background thread, by the ``EvaluatePolicy`` the builder hands
   the learner (``laneshift.actors.evaluation``: the learner never imports the simulator itself).
 
 Room: learner. May import: tensorboardX, torch, numpy, the contract (``laneshift.config``,
@@ -33,12 +33,13 @@ from tensorboardX.summary import hparams as hparams_summaries
 
 from laneshift.qnet import build_q_network
 
-#: A greedy policy (one observation -> one action).
-Policy = Callable[[np.ndarray], int]
+#: A network's greedy policy over rows of observations (rows -> one action each).
+BatchPolicy = Callable[[np.ndarray], np.ndarray]
 #: The seam to the env-running side: play ``policy`` greedily for a fixed set of episodes (the
-#: builder binds the env, the episode count and the seeds) and return the rates
-#: (``survival_rate``, ``achievement_rate``, ``return_mean``, ...).
-EvaluatePolicy = Callable[[Policy], dict]
+#: builder binds the env, the episode count and the seeds, and drives the ego vehicle and any
+#: policy vehicles with it) and return the rates (``survival_rate``, ``achievement_rate``,
+#: ``return_mean``, ...).
+EvaluatePolicy = Callable[[BatchPolicy], dict]
 
 
 def _number(v: Any) -> float | None:
@@ -146,11 +147,12 @@ class _Cancelled(Exception):
 
 
 class GreedyEval:
-    """Greedy episodes of a snapshot of the online network, on a background thread.
+    """Greedy episodes of a snapshot of the network the run hands out, on a background thread.
 
     ``start`` copies the weights to CPU (the only work on the learner's thread); the thread builds
-    its own network and hands its greedy policy to ``evaluate`` (which plays the builder's episodes:
-    the same validation episode seeds every time, ``train.validation_seed``) and leaves the result for ``take``. One evaluation at a time: one due
+    its own network and hands its greedy policy over rows (``BatchPolicy``) to ``evaluate``, which
+    plays the builder's episodes (the same validation episode seeds every time,
+    ``train.validation_seed``), and leaves the result for ``take``. One evaluation at a time: one due
     while another still runs waits for the next check. ``close`` gives a running one a little time,
     then cancels it (at the policy's next step).
     """
@@ -212,11 +214,7 @@ class GreedyEval:
                 with torch.no_grad():
                     return net(torch.as_tensor(x)).argmax(dim=1).numpy()
 
-            def greedy(obs: np.ndarray) -> int:
-                return int(batch(np.asarray(obs)[None])[0])
-
-            greedy.batch = batch  # type: ignore[attr-defined]  # drives env.policy_vehicles (evaluate_policy)
-            result = dict(self.evaluate(greedy))
+            result = dict(self.evaluate(batch))
         except _Cancelled:
             return
         except Exception as exc:  # e.g. the simulator cannot be built on this node: off, said once

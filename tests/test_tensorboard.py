@@ -215,9 +215,9 @@ def test_rehearsal_phase1_logs_under_pretrain_at_update_steps(tmp_path):
 
 def _episodes_of(env_cfg: EnvConfig, episodes: int):
     """The EvaluatePolicy the builder hands the learner: ``episodes`` greedy episodes on the env."""
-    from laneshift.actors.evaluation import evaluate_policy
+    from laneshift.actors.evaluation import GreedyPolicy, evaluate_policy
 
-    return lambda greedy: evaluate_policy(lambda env: greedy, env_cfg, episodes, seed=0)
+    return lambda batch: evaluate_policy(lambda env: GreedyPolicy(batch), env_cfg, episodes, seed=0)
 
 
 def test_greedy_eval_runs_a_copy_of_the_network_on_its_own_thread():
