@@ -118,7 +118,7 @@ def human_like_lanes(env_cfg: EnvConfig, episodes: int, seed: int) -> dict[str, 
 def run_compare(args: argparse.Namespace) -> dict:
     user = parse_set(args.set)
     base = load_run_config(args.config, {"env.scenario": args.scenario, "actor.workers": args.workers, **user})
-    methods, seeds = _names(args.methods), _seed_list(args.seeds)
+    methods, seeds = _names(args.methods), seed_list(args.seeds)
     out_dir = Path(args.out).resolve()
     # Every run's config before the first run starts: a bad method, seed or --set fails now, not hours in.
     configs = {(m, s): method_config(base, m, s, out_dir / f"{m}-s{s}", args.env_steps, user)
@@ -147,7 +147,7 @@ def run_compare(args: argparse.Namespace) -> dict:
                 f"{lane} survival {e['survival_rate']:.0%} achievement {e['achievement_rate']:.0%}"
                 for lane, e in evals.items()))
             overall.update()
-        results["methods"][method] = {"runs": runs, **_lane_stats(runs)}
+        results["methods"][method] = {"runs": runs, **lane_stats(runs)}
     if args.baselines:
         from laneshift.actors.envs.demonstrator import KeepLaneDriver, ScriptedDriver
 
@@ -190,7 +190,7 @@ def _names(text: str) -> list[str]:
     return methods
 
 
-def _seed_list(text: str) -> list[int]:
+def seed_list(text: str) -> list[int]:
     """``--seeds``: comma-separated integers >= 0."""
     try:
         seeds = [int(s) for s in text.split(",") if s.strip()]
@@ -255,7 +255,7 @@ def table2_rows(results: dict) -> list[tuple[str, str, int, dict, dict, dict, di
     return rows
 
 
-def _lane_stats(runs: list[dict]) -> dict:
+def lane_stats(runs: list[dict]) -> dict:
     """A method's per-lane numbers for results.json: the across-seed headline and the pooled rate."""
     out = {}
     for lane in INITIAL_LANES:
@@ -574,7 +574,7 @@ def merge_studies(results: dict, more: dict, where: str) -> None:
             raise SystemExit(f"--add {where}: {method} seed(s) {twice} are in both studies")
         runs += body["runs"]
         runs.sort(key=lambda r: r["seed"])
-        results["methods"][method] = {"runs": runs, **_lane_stats(runs)}
+        results["methods"][method] = {"runs": runs, **lane_stats(runs)}
     results["seeds"] = sorted({r["seed"] for body in results["methods"].values() for r in body["runs"]})
     for name, body in more["baselines"].items():
         results["baselines"].setdefault(name, body)

@@ -44,11 +44,12 @@ from typing import Any
 
 import yaml
 
+from laneshift.argtypes import add_set_arg, fraction, non_negative_int, parse_set, positive_int
 from laneshift.config import METHODS, ConfigError, EnvConfig, RunConfig, load_run_config, method_settings
 from laneshift.progress import progress, write
 from laneshift.studies.evaluate import INITIAL_LANES, evaluate_lanes, load_greedy_policy
-from laneshift.studies.experiments import (HUMAN_LIKE_ROW, _lane_stats, _seed_list, across_seeds, human_like_lanes,
-                                           method_config, metrics_records, plot_eval_curves, pooled, train_logged)
+from laneshift.studies.experiments import (HUMAN_LIKE_ROW, across_seeds, human_like_lanes, lane_stats, method_config,
+                                           metrics_records, plot_eval_curves, pooled, seed_list, train_logged)
 from laneshift.studies.stats import RESAMPLES
 
 #: The test episodes: episode i of each initial-lane setting is reset with seed TEST_SEED + i.
@@ -186,11 +187,9 @@ def plan(args: argparse.Namespace) -> tuple[Path, str, dict[int, RunConfig], dic
     """(out dir, road, each seed's config, each seed's state): every config is built (and a bad
     method, seed or --set refused) before the first run starts. A seed whose run stopped unfinished
     gets its saved config with this command's settings on top (as ``laneshift train --resume``)."""
-    from laneshift.argtypes import parse_set
-
     user = parse_set(args.set)
     method_settings(args.method, "--method")
-    seeds = _seed_list(args.seeds)
+    seeds = seed_list(args.seeds)
     if len(set(seeds)) != len(seeds):
         raise ConfigError(f"--seeds: a seed is named twice in {args.seeds!r}")
     if TEST_SEED + args.test_episodes > VALIDATION_SEED:
@@ -301,7 +300,7 @@ def summarise(args: argparse.Namespace, road: str, runs: list[dict], drivers: di
     """results.json: the protocol's numbers, in ``experiment compare``'s layout (``methods``,
     ``baselines``) plus the per-seed validation measures and the comparison with the scripted driver."""
     method = args.method
-    body = {"runs": runs, **_lane_stats(runs)}
+    body = {"runs": runs, **lane_stats(runs)}
     per_seed = {}
     for run in runs:
         curve = run["validation"]["curve"]
@@ -466,8 +465,6 @@ def run_protocol(args: argparse.Namespace) -> dict:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from laneshift.argtypes import add_set_arg, fraction, non_negative_int, positive_int
-
     p = subparsers.add_parser("protocol", help="the whole evaluation protocol for one method on one road: "
                                                "train seeds, test the final networks, baselines, table, publish")
     p.add_argument("--scenario", default="straight", choices=SCENARIOS, help="the road")
