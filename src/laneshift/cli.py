@@ -414,6 +414,7 @@ def _add_experiment(sub: Any) -> None:
     experiment = sub.add_parser("experiment", help="reproducible experiments (the paper's Table 2 comparison)")
     from laneshift.studies.checkpoint_curve import register as register_checkpoint_curve
     from laneshift.studies.experiments import register as register_experiments
+    from laneshift.studies.paper import register as register_paper
     from laneshift.studies.protocol import register as register_protocol
     from laneshift.studies.reward_study import register as register_presets
     from laneshift.studies.sb3_baseline import register as register_sb3
@@ -421,6 +422,7 @@ def _add_experiment(sub: Any) -> None:
     which = experiment.add_subparsers(dest="experiment_cmd", required=True, metavar="WHICH")
     register_experiments(which)
     register_protocol(which)
+    register_paper(which)
     register_checkpoint_curve(which)
     register_sb3(which)
     register_presets(which)

@@ -153,7 +153,7 @@ def eval_command(checkpoint: str | Path, env: dict, episodes: int, max_steps: in
     return shlex.join(argv)
 
 
-def _write_json(path: Path, data: Any) -> None:
+def write_json(path: Path, data: Any) -> None:
     """Written whole or not at all (a seed's file says it is done)."""
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(json.dumps(data, indent=2))
@@ -267,7 +267,7 @@ def run_seed(cfg: RunConfig, state: str, args: argparse.Namespace, out_dir: Path
               "validation": {"episode_seed": t.get("validation_seed"), "every": t["eval_every"],
                              "episodes": t["periodic_eval_episodes"], "curve": validation_curve(run_dir)},
               "command": command_line(), "git": git_revision(), "config": config}
-    _write_json(out_dir / f"{method}-s{seed}.json", record)
+    write_json(out_dir / f"{method}-s{seed}.json", record)
     write(f"protocol: {method} seed {seed}: " + ", ".join(
         f"{lane} survival {e['survival_rate']:.1%} achievement {e['achievement_rate']:.1%}"
         for lane, e in evals.items()))
@@ -292,7 +292,7 @@ def drive_baselines(env_cfg: EnvConfig, episodes: int, out_dir: Path) -> dict[st
         write(f"protocol: baselines: {path} is of other test episodes; driving them again")
     drivers = {SCRIPTED_ROW: evaluate_lanes(ScriptedDriver, env_cfg, episodes, TEST_SEED, progress="baseline scripted"),
                HUMAN_LIKE_ROW: human_like_lanes(env_cfg, episodes, TEST_SEED)}
-    _write_json(path, {"key": key, "drivers": drivers})
+    write_json(path, {"key": key, "drivers": drivers})
     return drivers
 
 
@@ -423,7 +423,7 @@ def publish(results: dict, dest: Path, road: str) -> list[Path]:
                "test": {"episode_seed": test["episode_seed"], "episodes_per_lane": test["episodes_per_lane"],
                         "max_steps": test["max_steps"], "lanes": lanes},
                "validation": run["validation"], "config": run["config"]}
-        _write_json(dest / f"{stem}.json", doc)
+        write_json(dest / f"{stem}.json", doc)
         written += [checkpoint, dest / f"{stem}.json"]
         write(f"protocol: published {checkpoint} and {stem}.json")
     return written
@@ -453,7 +453,7 @@ def run_protocol(args: argparse.Namespace) -> dict:
     drivers = drive_baselines(env_cfg, args.test_episodes, out_dir)
     results = summarise(args, road, runs, drivers)
     results["command"] = command_line()
-    _write_json(out_dir / "results.json", results)
+    write_json(out_dir / "results.json", results)
     table = render_table(results)
     (out_dir / "table.md").write_text(table)
     if plot_validation(results, out_dir) is None:
