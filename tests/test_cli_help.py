@@ -125,3 +125,17 @@ def test_demos_generate_reports_progress_on_stderr_and_its_result_on_stdout(tmp_
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.startswith("wrote ") and len(proc.stdout.splitlines()) == 1  # no progress on stdout
     assert "demos generate: 3/3 episode (100 %)" in proc.stderr, proc.stderr
+
+
+def test_help_is_for_users_and_train_says_what_its_shortcuts_leave_in_place(monkeypatch):
+    top = build_parser().format_help()
+    assert "Room:" not in top and "May import" not in top  # the module's note for developers stays out
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    train = next(p for p in _commands(build_parser(["train"])) if p.prog.endswith(" train"))
+    text = " ".join(train.format_help().split())
+    assert "(default: actor.workers = 2)" in text and "(default: train.env_steps = 20000)" in text
+    assert "everything on this machine (the default;" in text
+    monkeypatch.setenv("RAY_ADDRESS", "10.1.2.3:6379")
+    train = next(p for p in _commands(build_parser(["train"])) if p.prog.endswith(" train"))
+    text = " ".join(train.format_help().split())
+    assert "RAY_ADDRESS=10.1.2.3:6379 is set, so without --local the run goes to that cluster" in text

@@ -95,4 +95,5 @@ def parse_set(items: list[str]) -> dict[str, str]:
 
 def add_set_arg(p: argparse.ArgumentParser) -> None:
     p.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
-                   help="override any config field, e.g. --set learner.lr=1e-4 (repeatable)")
+                   help="override any config field, e.g. --set learner.lr=1e-4 (repeatable; `laneshift config "
+                        "fields TEXT` says what each field does)")

@@ -2,7 +2,7 @@
 holding human/scripted demonstrations, a torch learner).
 
 examples:
-    laneshift train --local --workers 2 --scenario straight --mode rehearsal --env-steps 20000 --run-dir runs/demo
+    laneshift train --local --workers 2 --scenario straight --method dqfd-bc --env-steps 30000 --run-dir runs/demo
     laneshift replay-server --config runs/demo/config.yaml
     laneshift learner --config runs/demo/config.yaml
     laneshift demos generate --scenario straight --episodes 50 --out demos/straight
@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from .argtypes import add_set_arg, endpoint, fraction, non_negative_int, parse_set, positive_float, positive_int
-from .config import ConfigError, RunConfig, load_run_config
+from .config import METHODS, ConfigError, RunConfig, load_run_config
 
 # ---------------------------------------------------------------------------- parser pieces
 
@@ -83,17 +83,12 @@ def _config_from(args: argparse.Namespace, shortcuts: dict[str, Any] | None = No
 
 
 def _train(args: argparse.Namespace) -> int:
-    import os
-
     preset = None
     if args.method:
         from laneshift.config import method_settings
 
         preset = method_settings(args.method, "--method")
-    shortcuts = {
-        "actor.workers": args.workers, "env.scenario": args.scenario, "replay.demo_mode": args.mode,
-        "train.env_steps": args.env_steps, "train.run_dir": args.run_dir, "train.parallel": args.parallel,
-        "env.observation": args.observation, "replay.demo_paths": args.demos, "transport.run_id": args.run_id}
+    shortcuts = {field: getattr(args, dest) for dest, field in TRAIN_SHORTCUTS.items()}
     resume = args.resume is not None
     if resume:  # the saved run's config, with this command's flags on top
         saved = Path(args.resume) / "config.yaml"
@@ -122,10 +117,29 @@ def _train(args: argparse.Namespace) -> int:
     return train_local(cfg, resume=resume, overwrite=args.overwrite)
 
 
+#: train's flags that set a config field (argparse dest -> section.field); their defaults are the config's.
+TRAIN_SHORTCUTS = {
+    "workers": "actor.workers", "scenario": "env.scenario", "mode": "replay.demo_mode", "env_steps": "train.env_steps",
+    "run_dir": "train.run_dir", "parallel": "train.parallel", "observation": "env.observation",
+    "demos": "replay.demo_paths", "run_id": "transport.run_id"}
+
+
+def _config_default(field: str) -> str:
+    """``(default: section.field = value)``: what a shortcut flag leaves in place when it is not given."""
+    section, name = field.split(".")
+    value = getattr(getattr(RunConfig(), section), name)
+    shown = ",".join(map(str, value)) if isinstance(value, tuple) else value
+    return f"(default: {field} = {shown if shown not in ('', ()) else 'none'})"
+
+
 def _add_train(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("train", help="train: local single-machine mode or on a Ray cluster")
     where = p.add_mutually_exclusive_group()
-    where.add_argument("--local", action="store_true", help="everything on this machine (the default)")
+    ray_address = os.environ.get("RAY_ADDRESS")
+    where.add_argument("--local", action="store_true",
+                       help="everything on this machine " + (f"(RAY_ADDRESS={ray_address} is set, so without --local "
+                                                             "the run goes to that cluster)" if ray_address
+                                                             else "(the default; with RAY_ADDRESS set, that cluster is)"))
     where.add_argument("--cluster", metavar="ADDRESS",
                        help="a running Ray cluster: auto (RAY_ADDRESS or this node's cluster), HOST:PORT, "
                             "or ray://HOST:10001")
@@ -134,13 +148,14 @@ def _add_train(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--mode", choices=["none", "retention", "rehearsal", "dqfd"],
                    help="how demos are used (the paper's three, or dqfd: pre-training then retention)")
     p.add_argument("--method", metavar="NAME",
-                   help="a named set of settings from `laneshift experiment compare` (none, retention, rehearsal, "
-                        "dqfd, dqfd-bc); --mode and --set win over it")
+                   help="a named set of settings (" + ", ".join(METHODS) + "; docs/RESULTS.md measures them); "
+                        "--mode and --set win over it")
     p.add_argument("--parallel", choices=["async", "sync"], help="MATLAB parallel training mode")
     p.add_argument("--env-steps", help="total env-step budget over all workers")
     p.add_argument("--observation", choices=["vector", "grayscale"],
                    help="what the network sees: a feature vector or stacked grayscale frames")
-    p.add_argument("--demos", help="demo shard dir(s), comma separated (default: scripted, generated if absent)")
+    p.add_argument("--demos", help="demo shard dir(s), comma separated (default: the scripted driver's, generated if "
+                                   "absent, for a demo mode)")
     p.add_argument("--run-dir", help="where checkpoints, logs, TensorBoard files and config go")
     p.add_argument("--run-id", help="zenoh key namespace (laneshift/<run-id>/...)")
     again = p.add_mutually_exclusive_group()
@@ -149,6 +164,9 @@ def _add_train(sub: argparse._SubParsersAction) -> None:
                             "each worker's remaining budget); flags and --set apply on top of its config")
     again.add_argument("--overwrite", action="store_true", help="start over in a run dir that already holds a run")
     _add_config_args(p)
+    for action in p._actions:  # a shortcut's default is the config field's: say which and what it is
+        if action.dest in TRAIN_SHORTCUTS and "default" not in (action.help or ""):
+            action.help = f"{action.help} {_config_default(TRAIN_SHORTCUTS[action.dest])}"
     p.set_defaults(func=_train)
 
 
@@ -377,13 +395,14 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     the tools' modules import gymnasium, matplotlib and the demo and study code: 0.52 -> 0.09 s of
     CPU before Ray starts and 65 -> 18 MB of RSS (measured: a process building ``build_parser()``
     against ``build_parser(["train"])``)."""
-    parser = Parser(prog="laneshift", description=__doc__)
+    parser = Parser(prog="laneshift", description=__doc__.split("\nRoom:")[0].rstrip())
     parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}",
                         help="print laneshift's version and exit")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     _add_train(sub)
     _add_services(sub)
     _add_inspection(sub)
+    _add_config(sub)
     # The top level has no option that takes a value: the first other word is the command.
     command = next((a for a in argv if not a.startswith("-")), None) if argv is not None else None
     if command in TOOL_COMMANDS:
@@ -408,6 +427,47 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     for command_parser in leaf_parsers(parser):  # errors name the command they came from
         command_parser.set_defaults(cli_prog=command_parser.prog)
     return parser
+
+
+def _config_cmd(args: argparse.Namespace) -> int:
+    from laneshift import config_reference as ref
+
+    if args.config_cmd == "fields":
+        fields = ref.find(args.text or "")
+        if not fields:
+            print(f"laneshift config fields: no field or meaning contains {args.text!r}", file=sys.stderr)
+            return 2
+        sys.stdout.write(ref.as_text(fields))
+    elif args.config_cmd == "reference":
+        sys.stdout.write(ref.as_markdown())
+    elif args.config_cmd == "methods":
+        for name, settings in METHODS.items():
+            print(f"{name}: " + (", ".join(f"{k}={v}" for k, v in settings.items())))
+    else:  # show
+        import yaml
+
+        preset = None
+        if args.method:
+            from laneshift.config import method_settings
+
+            preset = method_settings(args.method, "--method")
+        sys.stdout.write(yaml.safe_dump(_config_from(args, preset=preset).to_dict(), sort_keys=False))
+    return 0
+
+
+def _add_config(sub: Any) -> None:
+    p = sub.add_parser("config", help="the configuration: every field with its meaning, a resolved config, "
+                                      "the method presets")
+    which = p.add_subparsers(dest="config_cmd", required=True, metavar="WHAT")
+    f = which.add_parser("fields", help="every config field (or those whose name or meaning contains TEXT): "
+                                        "type, default, meaning")
+    f.add_argument("text", nargs="?", metavar="TEXT", help="a section (replay), a field (lr) or a word (epsilon)")
+    which.add_parser("reference", help="the configuration reference as markdown (docs/config.md)")
+    which.add_parser("methods", help="the named method presets (--method) and the fields each sets")
+    s = which.add_parser("show", help="the config a run would get from --config, --method and --set, as YAML")
+    s.add_argument("--method", metavar="NAME", help=f"a method preset ({', '.join(METHODS)})")
+    _add_config_args(s)
+    p.set_defaults(func=_config_cmd)
 
 
 def _add_experiment(sub: Any) -> None:

@@ -114,11 +114,11 @@ class EnvConfig:
 class ActorConfig:
     """Env workers (Ray actors): how many, how they explore, how often they send."""
 
-    workers: int = 2
-    envs_per_worker: int = 1
+    workers: int = 2  # env workers, one Ray actor (process) each
+    envs_per_worker: int = 1  # envs each worker steps in turn, acting for all of them in one forward pass
     send_every: int = 32  # publish a transitions batch every K env steps (MATLAB: "every N steps")
     exploration: Literal["linear", "exponential", "apex"] = "linear"  # linear (paper) | exponential (MATLAB) | apex (per-actor fixed epsilons)
-    epsilon_start: float = 1.0
+    epsilon_start: float = 1.0  # exploration at a worker's first step
     epsilon_final: float = 0.1  # paper condition 5: 1.0 -> 0.1
     epsilon_decay_steps: int = 0  # linear: a worker's env steps from start to final; 0 = half its budget
     epsilon_decay_rate: float = 1e-4  # exponential: eps *= (1 - rate) per step (MATLAB EpsilonDecay)
@@ -126,9 +126,9 @@ class ActorConfig:
     # A value >= 0 starts phase 2 there instead, to keep more of what phase 1 learned.
     phase2_epsilon_start: float = -1.0
     apex_epsilon: float = 0.4  # apex: eps_i = apex_epsilon ** (1 + apex_alpha * i / (N - 1))
-    apex_alpha: float = 7.0
-    torch_threads: int = 1
-    seed: int = 0
+    apex_alpha: float = 7.0  # apex: how fast the per-actor epsilons fall from the first actor to the last
+    torch_threads: int = 1  # torch threads in each worker process (its acting forward pass)
+    seed: int = 0  # worker i seeds its env and exploration from seed + i
 
     def __post_init__(self) -> None:
         _check_choices(self, "actor")
@@ -192,7 +192,7 @@ class ReplayConfig:
     # demo region in retention), each env worker sends to one (wire.shard_of: a stable function of
     # its name) and the learner samples across them in proportion to their sizes (learner/shards.py).
     shards: int = 1
-    seed: int = 0
+    seed: int = 0  # the sampler's random generator (shard i: seed + i)
 
     def __post_init__(self) -> None:
         _check_choices(self, "replay")
@@ -251,7 +251,7 @@ class ReplayConfig:
 class LearnerConfig:
     """Double DQN hyperparameters (all of them, CleanRL style) and the learner's cadence."""
 
-    lr: float = 5e-4
+    lr: float = 5e-4  # Adam's step size
     # The learning rate at the end of the env-step budget: it falls linearly from ``lr`` as the run's
     # env steps go from 0 to train.env_steps (pre-training keeps ``lr``). 0 = constant ``lr``.
     # A decaying step size lets the last network settle instead of being one draw of the TD noise.
@@ -260,7 +260,7 @@ class LearnerConfig:
     # moving average of the online network's weights, updated after every update with this decay
     # (torch.optim.swa_utils; 0.999 averages over about the last 1,000 updates). 0 = off (online).
     ema_decay: float = 0.0
-    gamma: float = 0.99
+    gamma: float = 0.99  # discount per env step
     # n-step returns (DQfD, Rainbow): actors and the demo loader sum n rewards per item, the target
     # bootstraps with gamma^n. 1 = the paper's one-step Double DQN.
     n_step: int = 1
@@ -270,7 +270,7 @@ class LearnerConfig:
     # about 3x the updates/s on 2 CPU cores; what the pixel Table 2 runs use).
     cnn: Literal["nature", "small"] = "nature"
     target_update_period: int = 500  # updates between hard target-network syncs
-    huber_delta: float = 1.0
+    huber_delta: float = 1.0  # the TD loss is quadratic within this distance, linear beyond
     # The value the TD target takes after an episode's terminal step (a crash or leaving the road)
     # instead of 0 (the paper's). Condition 5 pays -5 for a crash and -1 a step for driving on in a
     # non-target lane, so with gamma 0.99 a crash is worth more than waiting about five steps for a
@@ -284,7 +284,7 @@ class LearnerConfig:
     # DQfD (Hester et al. 2018) large-margin loss on demo rows: lambda * (max_a [Q(s,a) + m 1{a != a_E}]
     # - Q(s,a_E)), pushing the demonstrator's action above the others by a margin. 0 = off.
     margin_loss_weight: float = 0.0
-    margin: float = 0.8
+    margin: float = 0.8  # DQfD's m: how far the demonstrator's action must stand above the others
     # Supervised imitation on demo rows: cross-entropy of softmax(Q(s, .)) against the demo action. 0 = off.
     bc_loss_weight: float = 0.0
     dueling: bool = False  # dueling head (Wang et al. 2016): Q = V + A - mean A
@@ -303,11 +303,11 @@ class LearnerConfig:
     # greedy scores: `laneshift experiment checkpoints`); off: only latest/final are kept.
     keep_checkpoints: bool = False
     prefetch: int = 4  # batches per sample request (one round trip, several updates)
-    torch_threads: int = 1
+    torch_threads: int = 1  # torch threads for the learner's updates
     # The learner's Prometheus /metrics: -1 off, 0 a free port (local runs turn it on), else that port.
     metrics_port: int = -1
     metrics_host: str = "127.0.0.1"  # bind elsewhere only on purpose: no authentication
-    seed: int = 0
+    seed: int = 0  # network initialisation and the learner's own random draws
 
     def __post_init__(self) -> None:
         _check_choices(self, "learner")
@@ -371,8 +371,8 @@ class TrainConfig:
 
     env_steps: int = 20_000  # total env steps over all workers (after rehearsal phase 1)
     parallel: Literal["async", "sync"] = "async"  # async | sync (MATLAB parallel training modes)
-    run_dir: str = "runs/latest"
-    log_every_s: float = 2.0
+    run_dir: str = "runs/latest"  # checkpoints, metrics.jsonl, TensorBoard files, the resolved config and logs
+    log_every_s: float = 2.0  # seconds between the launcher's progress lines
     eval_episodes: int = 10  # greedy episodes in the final summary (0 = skip)
     # Greedy evaluation during training, every this many env steps (0 = off): the learner copies its
     # current network to a background thread with its own env and logs survival, achievement and
@@ -386,7 +386,7 @@ class TrainConfig:
     # Scripted episodes in the default demo shard (demo modes without replay.demo_paths);
     # 0 = just enough for the demo region (retention) or 2,000 transitions (rehearsal).
     demo_episodes: int = 0
-    seed: int = 0
+    seed: int = 0  # the default demo shard's episode seeds start at seed + 10,000; `experiment` commands give it to every component
 
     def __post_init__(self) -> None:
         _check_choices(self, "train")
@@ -428,14 +428,14 @@ class DeployConfig:
     # The endpoint env workers connect to, when not the run's router itself: a relay or proxy in
     # front of it (e.g. a router per node meshed with the run's, or the chaos suite's slow link).
     worker_router: str = ""
-    router_cpus: float = 0.0
-    replay_cpus: float = 1.0
-    learner_cpus: float = 1.0
-    worker_cpus: float = 1.0
-    router_resources: dict[str, float] = field(default_factory=dict)
-    replay_resources: dict[str, float] = field(default_factory=dict)
-    learner_resources: dict[str, float] = field(default_factory=dict)
-    worker_resources: dict[str, float] = field(default_factory=dict)
+    router_cpus: float = 0.0  # Ray num_cpus of the router actor
+    replay_cpus: float = 1.0  # Ray num_cpus of each replay server
+    learner_cpus: float = 1.0  # Ray num_cpus of the learner
+    worker_cpus: float = 1.0  # Ray num_cpus of each env worker
+    router_resources: dict[str, float] = field(default_factory=dict)  # Ray custom resources of the router actor
+    replay_resources: dict[str, float] = field(default_factory=dict)  # Ray custom resources of each replay server
+    learner_resources: dict[str, float] = field(default_factory=dict)  # of the learner (GPU: its num_gpus)
+    worker_resources: dict[str, float] = field(default_factory=dict)  # Ray custom resources of each env worker
     # Ray restarts a component that died this many times (the run fails after that).
     max_restarts: int = 5
     start_timeout_s: float = 180.0  # a component that is not serving by then fails the run, named
@@ -611,7 +611,8 @@ def build_section(name: str, values: Mapping[str, Any]) -> Any:
     known = {f.name for f in dataclasses.fields(cls)}
     unknown = set(values) - known
     if unknown:
-        raise ConfigError(f"{name}.{sorted(unknown)[0]}: unknown field (known: {', '.join(sorted(known))})")
+        raise ConfigError(f"{name}.{sorted(unknown)[0]}: unknown field (known: {', '.join(sorted(known))}; "
+                          f"`laneshift config fields {name}` says what each does)")
     kwargs = {k: _coerce(f"{name}.{k}", hints[k], v) for k, v in values.items()}
     try:
         return cls(**kwargs)
