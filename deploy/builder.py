@@ -116,7 +116,7 @@ class Builder:
         ``train.periodic_eval_episodes`` episodes on validation episode seeds (``train.validation_seed``
         on: the same episodes every time, in every seed's run, apart from the studies' test seeds)."""
         t = self.cfg.train
-        if not t.eval_every:
+        if not t.eval_interval:
             return None
         from laneshift.actors.evaluation import GreedyPolicy, evaluate_policy
 

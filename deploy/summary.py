@@ -4,7 +4,8 @@ learner's last status, replay losses, restarts, the final greedy evaluation).
 It reads a ``RunEnd`` (what the launcher's ``Run`` knows when its components have stopped), never
 the launcher itself: ``deploy.launch`` imports this module.
 
-Room: deploy, the wiring. May import: the contract and the env-running side's evaluation.
+Room: deploy, the wiring. May import: the contract, the env-running side's evaluation and the
+learner's metrics log (for the final evaluation's TensorBoard scalars).
 """
 
 from __future__ import annotations
@@ -86,9 +87,29 @@ def summarise(run: RunEnd, why: str, wall: float, out: TextIO) -> dict:
         result["eval"] = evaluate_checkpoint(final, cfg.env, episodes=cfg.train.eval_episodes,
                                              seed=cfg.train.seed + 12345)
         lines.append(f"greedy eval     {format_result(result['eval'])}")
+        record_final_eval(run_dir, steps, result["eval"])
     lines += [f"run dir         {run_dir}", f"checkpoint      {final}", f"tensorboard     {_tensorboard_command()} --logdir {run_dir / 'tb'}"]
     print("\n".join(lines), file=out, flush=True)
     return result
+
+
+#: The final greedy evaluation's numbers that go to TensorBoard (``final_eval/*``) and metrics.jsonl.
+FINAL_EVAL_KEYS = ("survival_rate", "achievement_rate", "return_mean", "length_mean")
+
+
+def record_final_eval(run_dir: Path, env_steps: int, evaluation: dict) -> None:
+    """The summary's greedy evaluation beside the run's other metrics: TensorBoard scalars
+    ``final_eval/<key>`` at the run's env steps and a metrics.jsonl record of kind ``final_eval``
+    (the learner has ended; this appends a new event file to ``<run dir>/tb``)."""
+    from laneshift.learner.metrics import MetricsLog
+
+    log = MetricsLog(run_dir)
+    try:
+        log.write("final_eval", env_steps, {"env_steps": env_steps, "episodes": evaluation.get("episodes"),
+                                            **{k: evaluation.get(k) for k in FINAL_EVAL_KEYS}},
+                  scalars={f"final_eval/{k}": evaluation.get(k) for k in FINAL_EVAL_KEYS})
+    finally:
+        log.close()
 
 
 def _updates_lost_text(restored_from: dict | None) -> str:

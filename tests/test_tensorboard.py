@@ -330,3 +330,31 @@ def test_the_wait_for_the_replay_to_fill_is_not_counted_as_the_workers_bounding_
     learner._finish()
     assert status["sample_wait_s"] >= 0.5  # the fill, waited by the update thread
     assert status["training_s"] is not None and status["training_wait_s"] < 0.25
+
+
+def test_the_summarys_final_greedy_evaluation_is_in_tensorboard_and_metrics_jsonl(tmp_path):
+    from laneshift.deploy.summary import record_final_eval
+
+    (tmp_path / "tb").mkdir()
+    record_final_eval(tmp_path, 30_000, {"episodes": 10, "survival_rate": 0.9, "achievement_rate": 0.8,
+                                         "return_mean": 12.5, "length_mean": 290.0, "return_std": 1.0})
+    acc = event_accumulator.EventAccumulator(str(tmp_path / "tb"))
+    acc.Reload()
+    scalars = {tag: acc.Scalars(tag)[-1] for tag in acc.Tags()["scalars"]}
+    assert set(scalars) == {"final_eval/survival_rate", "final_eval/achievement_rate", "final_eval/return_mean",
+                            "final_eval/length_mean"}
+    assert scalars["final_eval/achievement_rate"].value == pytest.approx(0.8)
+    assert scalars["final_eval/achievement_rate"].step == 30_000
+    (line,) = (tmp_path / "metrics.jsonl").read_text().splitlines()
+    rec = json.loads(line)
+    assert rec["kind"] == "final_eval" and rec["env_steps"] == 30_000 and rec["episodes"] == 10
+
+
+def test_a_long_run_evaluates_greedily_during_training_unless_told_otherwise():
+    from laneshift.config import AUTO_EVAL_FROM
+
+    assert load_run_config().train.eval_interval == 0  # 20,000 env steps: short, no evaluation
+    long_run = load_run_config(overrides={"train.env_steps": AUTO_EVAL_FROM})
+    assert long_run.train.eval_every == -1 and long_run.train.eval_interval == AUTO_EVAL_FROM // 10
+    assert load_run_config(overrides={"train.env_steps": 10**6, "train.eval_every": 0}).train.eval_interval == 0
+    assert load_run_config(overrides={"train.eval_every": 500}).train.eval_interval == 500

@@ -365,6 +365,11 @@ class TransportConfig:
                self.connect_timeout_s)
 
 
+#: Runs at least this long evaluate greedily ten times during training unless told otherwise
+#: (train.eval_every = -1): long enough that 10 x 5 episodes cost under 1 % of the run.
+AUTO_EVAL_FROM = 100_000
+
+
 @dataclass(frozen=True)
 class TrainConfig:
     """The run as a whole: budget, parallel mode and where things go."""
@@ -374,11 +379,12 @@ class TrainConfig:
     run_dir: str = "runs/latest"  # checkpoints, metrics.jsonl, TensorBoard files, the resolved config and logs
     log_every_s: float = 2.0  # seconds between the launcher's progress lines
     eval_episodes: int = 10  # greedy episodes in the final summary (0 = skip)
-    # Greedy evaluation during training, every this many env steps (0 = off): the learner copies its
+    # Greedy evaluation during training, every this many env steps (0 = off; -1 = a tenth of
+    # train.env_steps for runs of at least 100,000 env steps (AUTO_EVAL_FROM), else off): the learner copies its
     # current network to a background thread with its own env and logs survival, achievement and
     # return to TensorBoard (eval/*) and metrics.jsonl (kind "eval"); training goes on meanwhile.
     # The end of the run evaluates once more if a multiple was passed since (waiting up to 10 s).
-    eval_every: int = 0
+    eval_every: int = -1
     periodic_eval_episodes: int = 5  # greedy episodes per evaluation during training (train.eval_every)
     validation_seed: int = 200_000  # its episode i is reset with seed validation_seed + i (studies test from 100,000)
     # MATLAB's stop criterion: end the run as soon as an episode's return reaches this (inf = never).
@@ -395,13 +401,21 @@ class TrainConfig:
         _check(self.env_steps >= 1, "train.env_steps", "must be >= 1", self.env_steps)
         _check(self.log_every_s > 0, "train.log_every_s", "must be > 0", self.log_every_s)
         _check(self.eval_episodes >= 0, "train.eval_episodes", "must be >= 0", self.eval_episodes)
-        _check(self.eval_every >= 0, "train.eval_every", "must be >= 0 (0 = off)", self.eval_every)
+        _check(self.eval_every >= -1, "train.eval_every", "must be >= 0 (0 = off) or -1 (a tenth of long runs)",
+               self.eval_every)
         _check(self.periodic_eval_episodes >= 1, "train.periodic_eval_episodes", "must be >= 1",
                self.periodic_eval_episodes)
         _check(self.validation_seed >= 0, "train.validation_seed", "must be >= 0", self.validation_seed)
         _check(not math.isnan(self.stop_return), "train.stop_return", "must be a number (inf = never)",
                self.stop_return)
         _check(self.seed >= 0, "train.seed", "must be >= 0", self.seed)
+
+    @property
+    def eval_interval(self) -> int:
+        """Env steps between greedy evaluations during training (0 = none): ``eval_every`` resolved."""
+        if self.eval_every >= 0:
+            return self.eval_every
+        return self.env_steps // 10 if self.env_steps >= AUTO_EVAL_FROM else 0
 
 
 @dataclass(frozen=True)
