@@ -184,6 +184,8 @@ class Run:
         port = self.builder.router_port(self.local)
         began = time.monotonic()
         in_launcher = self._router_in_launcher()
+        if not self.local:  # a private local cluster is sized for the run; a shared one may not hold it
+            self._check_placement(in_launcher)
         if in_launcher:  # opened below, once the actors are on their way (opening takes ~0.4 s)
             endpoint = f"tcp/{host}:{port}"
         else:
@@ -251,6 +253,26 @@ class Run:
         router = self.where["router"]
         router_where = f"router {'in this launcher ' if router.get('in') == 'launcher' else ''}on {router['node_ip']}"
         self._say(f"train: {router_where}, {replay_where}, learner on {learner['node_ip']}")
+
+    def _check_placement(self, in_launcher: bool) -> None:
+        """Refuse at once, with the numbers, a run the cluster cannot hold (placement_check)."""
+        import ray
+
+        from .placement_check import Need, check_placement
+
+        names = [*([] if in_launcher else ["router"]), *self.builder.replay_servers, "learner", *self.builder.workers]
+        needs = []
+        for name in names:
+            p = self.builder.placement(name)
+            needs.append(Need(name, {"CPU": p.num_cpus, **({"GPU": p.num_gpus} if p.num_gpus else {}),
+                                     **p.resources}))
+        nodes = [{k: float(v) for k, v in n.get("Resources", {}).items() if not k.startswith("node:")}
+                 for n in ray.nodes() if n.get("Alive")]
+        verdict = check_placement(needs, nodes)
+        if verdict.refusal:
+            raise LaunchError(f"cannot place this run on the cluster: {verdict.refusal}")
+        if verdict.warning:
+            self._say(f"train: warning: {verdict.warning}")
 
     # -- supervise
 

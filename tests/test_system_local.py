@@ -281,10 +281,20 @@ def test_cluster_mode_spreads_workers_over_two_ray_nodes(tmp_path, monkeypatch):
         cluster.add_node(num_cpus=1, temp_dir=ray_tmp)
         cluster.wait_for_nodes()
         run_dir = tmp_path / "run"
+        placement = {"deploy.replay_cpus": 0, "deploy.learner_cpus": 0,
+                     "deploy.router_resources": '{"laneshift_replay": 0.01}',
+                     "deploy.replay_resources": '{"laneshift_replay": 0.5}',
+                     "deploy.learner_resources": '{"laneshift_learner": 1}'}
+        # Three workers of one CPU on two one-CPU nodes: refused before any actor exists, with the numbers.
+        too_big = load_run_config(overrides={**FAST, **placement, "actor.workers": 3,
+                                             "train.run_dir": str(tmp_path / "too-big")})
+        out, began = io.StringIO(), time.monotonic()
+        assert train_cluster(too_big, cluster.address, out=out) == 1
+        assert ("cannot place this run on the cluster: the run needs 3 CPU (router 0, replay-server 0, learner 0, "
+                "workers 3) and the cluster has 2 on 2 nodes") in out.getvalue(), out.getvalue()
+        assert time.monotonic() - began < 60
         cfg = load_run_config(overrides={
-            **FAST, "train.run_dir": str(run_dir), "train.env_steps": 4000, "replay.min_size": 200,
-            "deploy.replay_cpus": 0, "deploy.learner_cpus": 0, "deploy.router_resources": '{"laneshift_replay": 0.01}',
-            "deploy.replay_resources": '{"laneshift_replay": 0.5}', "deploy.learner_resources": '{"laneshift_learner": 1}'})
+            **FAST, **placement, "train.run_dir": str(run_dir), "train.env_steps": 4000, "replay.min_size": 200})
         out = io.StringIO()
         assert train_cluster(cfg, cluster.address, out=out) == 0, out.getvalue()
     finally:
