@@ -6,7 +6,7 @@ few rows is faster than torch's per-call overhead. It reads the learner's weight
 state-dict names (``net.0.weight``, ..., a dueling head's ``value`` / ``advantage``) and computes
 exactly what ``laneshift.qnet.MLPQNetwork`` computes, in float32. Image observations use the
 torch network (the Nature CNN), imported only then.
-May import: the contract (``laneshift.wire``), numpy, threadpoolctl; torch and
+Room: actors, the env-running component. May import: the contract (``laneshift.wire``), numpy, threadpoolctl; torch and
 ``laneshift.qnet`` only for image observations.
 
     >>> import numpy as np

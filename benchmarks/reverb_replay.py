@@ -28,7 +28,7 @@ venv does not share):
     make bench-reverb
     .venv-reverb/bin/python benchmarks/reverb_replay.py --batch 32 --duration 3
 
-What it may import: the standard library, numpy, reverb and tensorflow (Reverb's dataset). Nothing of laneshift (its venv has
+Room: benchmarks (a peer, run in its own venv). May import: the standard library, numpy, reverb and tensorflow (Reverb's dataset). Nothing of laneshift (its venv has
 none of laneshift's dependencies).
 """
 

@@ -24,6 +24,9 @@ How to run it (``make bench-rllib`` creates .venv-rllib if missing and runs this
     make bench-rllib                                    # 20,000 env steps, ratio 32
     make bench-rllib RLLIB_ARGS="--env-steps 3000 --ratio 8"
     .venv-rllib/bin/python benchmarks/rllib_dqn.py --env-steps 20000 --ratio 128
+
+Room: benchmarks (a peer, run in its own venv). May import: Ray RLlib, gymnasium, torch, laneshift's env
+and memory meter (as the text above says), the standard library.
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ same shape, so the launcher supervises them all alike:
   runs beside ``run()``).
 
 Each actor writes its output to ``<run dir>/logs/<component>.log`` on its node.
-May import: the contract, ``deploy.builder``, Ray; components only through the builder.
+Room: deploy, the wiring. May import: the contract, ``deploy.builder``, Ray; components only through the builder.
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ What it is: one training run per fault, each with the fault injected at a fixed 
 run, and one table row per fault: survived, recovery seconds, transitions made / stored /
 counted lost, weights versions monotonic, demo shard bytes identical, processes left behind.
 ``tests/test_faults.py`` runs the same faults (with ``FaultInjector``) as fast tests.
-May import: the contract and ``deploy``.
+Room: the tools (the fault suite, beside the wiring it strikes). May import: the contract and ``deploy``.
 
     laneshift chaos --faults worker,learner,router,replay,replay-after-checkpoint --json
     laneshift chaos --faults disk-full,unwritable,stats-flood,launcher-sigterm,launcher-kill

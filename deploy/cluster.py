@@ -5,7 +5,7 @@ sets) joins the cluster this node belongs to; ``HOST:PORT`` its GCS; ``ray://HOS
 through Ray Client (``laneshift[cluster]``). Router, replay server, learner and env workers are
 Ray actors placed by their ``deploy.*_resources``; the router listens on the address of the node
 it landed on (``deploy.advertise_host`` to override) at ``deploy.router_port`` (7447 by default).
-May import: ``deploy.launch``.
+Room: deploy, the wiring. May import: ``deploy.launch``.
 
     laneshift train --cluster auto --workers 16 --scenario straight --mode rehearsal
 """

@@ -6,7 +6,7 @@ talking through in-memory links to a ReplayCore (one per shard with ``replay.sha
 worker sending to its shard and the learner sampling all through ``learner.shards.ShardedReplay``,
 as over zenoh). Every message still goes through the wire encoder and decoder, so the contract is
 exercised as in a real run.
-May import: the contract, ``deploy.builder`` and the learner's replay seams (``learner.seams``, ``learner.shards``).
+Room: deploy, the wiring. May import: the contract, ``deploy.builder`` and the learner's replay seams (``learner.seams``, ``learner.shards``).
 
     >>> from laneshift.config import load_run_config
     >>> cfg = load_run_config(overrides={"env.scenario": "lka", "train.env_steps": 2000})  # doctest: +SKIP

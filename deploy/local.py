@@ -2,7 +2,7 @@
 
 What it is: the local entry of the one launcher (``deploy.launch``); every component still runs
 as its own Ray actor process, exactly as on a cluster.
-May import: ``deploy.launch``.
+Room: deploy, the wiring. May import: ``deploy.launch``.
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 What it is: ``Router`` (a zenoh session in router mode on one endpoint), run by the Ray actor
 ``deploy.actors.RouterActor`` in a cluster run, inside the launcher's process in a local run
 (``deploy.router_in``), and by ``laneshift router`` on its own.
-May import: the contract (``laneshift.transport``) and zenoh; no component.
+Room: deploy, the wiring. May import: the contract (``laneshift.transport``) and zenoh; no component.
 
 (On a cluster, ``zenohd`` works as well; this one needs nothing beyond the Python package.)
 Clients reconnect by themselves when a router comes back on the same endpoint (measured: about

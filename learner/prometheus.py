@@ -5,7 +5,7 @@ status into metrics at scrape time (so a scrape costs the learner nothing betwee
 the process collector, served by ``prometheus_client``'s own HTTP server on a thread. Counts that
 only grow (updates, env steps, episodes) are counters (``_total``); the rest are gauges, with units
 in their names. On with ``learner.metrics_port`` (-1 off, 0 a free port); local runs turn it on.
-May import: prometheus_client and the standard library (no laneshift component).
+Room: learner (component). May import: prometheus_client and the standard library (no laneshift component).
 """
 
 from __future__ import annotations

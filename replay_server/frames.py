@@ -19,7 +19,7 @@ into one ring of single frames, and a sample gathers its stacks from it.
   how many items went that way (``evicted_for_frames``).
 - ``dedup_stacks``: the same for a fixed set of stacks (the demo table), done once at load.
 
-May import: numpy, zlib, the contract (laneshift.wire), and .storage.
+Room: replay_server (component). May import: numpy, zlib, the contract (laneshift.wire), and .storage.
 """
 
 from __future__ import annotations

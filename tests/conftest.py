@@ -6,7 +6,7 @@ that a new test in one of these files is in the group without saying so:
     .venv/bin/python -m pytest -m system                       # the whole-system tests
 
 ``make test`` runs both (``-m "not chaos"``).
-May import: pytest.
+Room: tests. May import: pytest.
 """
 
 from __future__ import annotations

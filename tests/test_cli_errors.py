@@ -3,7 +3,7 @@
 Each case runs the real command line (``python -m laneshift.cli``) as a subprocess, with input
 that every command must refuse before doing any work: an unknown scenario, a malformed --set,
 missing files or run dirs, bad numbers, an unreachable zenoh router. A case takes the CLI's
-start-up time (a few seconds), nothing more; they run a few at a time. May import: the standard library and pytest.
+start-up time (a few seconds), nothing more; they run a few at a time. Room: tests, system (the laneshift command in subprocesses). May import: the standard library and pytest.
 """
 
 from __future__ import annotations

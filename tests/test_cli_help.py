@@ -2,7 +2,7 @@
 default), --version, and progress lines on stderr when stderr is not a terminal.
 
 Walks the real parser (``laneshift.cli.build_parser``), in process; two subprocesses check the
-installed version and a long command's stdout/stderr split. May import: the laneshift CLI and
+installed version and a long command's stdout/stderr split. Room: tests, unit. May import: the laneshift CLI and
 ``laneshift.progress``, pytest and the standard library.
 """
 

@@ -4,7 +4,7 @@ What it is: docs/wire.md §12's commands run as written (a router and a standalo
 as subprocesses, then docs/examples/foreign_client.py against them), and docs/wire.md's stated
 facts that a client has to trust (the hex example's sizes, kind 7 on a transitions key, the
 required "arrays" list, the replay/info key).
-May import: the standard library, pytest, httpx, numpy and laneshift (the encoder and core the
+Room: tests, unit. May import: the standard library, pytest, httpx, numpy and laneshift (the encoder and core the
 docs describe); the example itself is run as a separate process and must import no laneshift.
 Every process this file starts is ended by its own PID.
 """

@@ -15,7 +15,7 @@ inside functions), read with ``ast`` so nothing is imported to check it:
   moving the piece both sides need into a module of its own, or down a floor.
 
 ``python tests/test_import_graph.py`` prints which floor imports which, and any circle.
-May import: the standard library and pytest.
+Room: tests, unit. May import: the standard library and pytest.
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ shifting 4-frame stacks a frame-stacking env makes (reset: the first frame 4 tim
 n-step items in batches, two actors interleaved. Every sampled item must be exactly the stacks
 that were sent for its key, whatever the frame ring's size (a too small ring drops the oldest
 items early, counted, and never returns a wrong frame), through checkpoints and in the demo table.
-May import: numpy, pytest, laneshift (wire, config, replay_server).
+Room: tests, unit. May import: numpy, pytest, laneshift (wire, config, replay_server).
 """
 
 from __future__ import annotations

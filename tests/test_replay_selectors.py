@@ -1,5 +1,5 @@
 """``replay_server.selectors``: the two row pickers the replay core holds, on their own.
-May import: numpy, pytest, laneshift.replay_server.selectors.
+Room: tests, unit. May import: numpy, pytest, laneshift.replay_server.selectors.
 """
 
 from __future__ import annotations

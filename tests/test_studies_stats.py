@@ -1,6 +1,6 @@
 """The across-seed statistics of the studies (``laneshift.studies.stats``): the percentile bootstrap
 over runs and curves on a common grid, on cases whose answer is known. Fast and deterministic (the
-bootstrap is seeded). May import: laneshift.studies.stats, numpy, pytest.
+bootstrap is seeded). Room: tests, unit. May import: laneshift.studies.stats, numpy, pytest.
 """
 
 from __future__ import annotations

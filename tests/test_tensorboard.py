@@ -4,7 +4,7 @@ during training (``train.eval_every``) on the LKA plant.
 
 In process, no Ray, no zenoh: a Learner over fake links fed synthetic batches and episode
 records, event files read back with TensorBoard's own reader.
-May import: the learner, the contract, the in-process runner, tensorboard's event reader.
+Room: tests, unit. May import: the learner, the contract, the in-process runner, tensorboard's event reader.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ What it is: transport.WaitLines and wait_with_lines on a fake clock; an env work
 for weights through a real router in this process; and a real `laneshift learner` started with no
 router, which must say it waits for the router, then, once one is started, that it connected and
 that it waits for the replay server.
-May import: the standard library, pytest, zenoh and laneshift.
+Room: tests, unit. May import: the standard library, pytest, zenoh and laneshift.
 Every process this file starts is ended by its own PID (SIGTERM, then SIGKILL after a bound).
 """
 

@@ -5,7 +5,7 @@ What it is: an example, run by tests/test_docs_examples.py against a standalone 
 builds a TRANSITIONS message byte by byte, publishes it, samples the rows back and checks them,
 and checks two documented refusals (a kind-7 message on a transitions key counts as
 ``wrong_kind``; a header without ``"arrays"`` is answered ``bad_request``).
-May import: the Python standard library and ``zenoh`` (eclipse-zenoh 1.x) only. Nothing from
+Room: docs example (a client in another program). May import: the Python standard library and ``zenoh`` (eclipse-zenoh 1.x) only. Nothing from
 laneshift, not even numpy: every byte is packed and parsed here, as docs/wire.md describes.
 
     python docs/examples/foreign_client.py --router tcp/127.0.0.1:7447 --run-id run

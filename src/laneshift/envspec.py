@@ -4,7 +4,7 @@
 Contract floor: computed once by whoever launches the run (``laneshift.actors.envs.spec_of``
 builds the env and reads its spaces) and handed to the components as an ``EnvSpec``, or as the
 plain dict of ``spec_to_dict`` across a process boundary; no process that does not run the
-simulator builds one just to learn the observation's shape. May import: ``laneshift.config``,
+simulator builds one just to learn the observation's shape. Room: the contract (shared by every process). May import: ``laneshift.config``,
 ``laneshift.wire``.
 
     >>> from laneshift.config import EnvConfig

@@ -7,7 +7,7 @@ TTY the same numbers as a plain line at most every ``LANESHIFT_PROGRESS_S`` seco
 Progress always goes to stderr, so JSON printed on stdout stays parseable. ``LANESHIFT_PROGRESS=0``
 (or tqdm's own ``TQDM_DISABLE=1``) turns it off.
 
-May import: the standard library and tqdm only (the contract's modules and the CLI import this).
+Room: the contract (shared by every process). May import: the standard library and tqdm only (the contract's modules and the CLI import this).
 
     with progress(total=episodes, desc="eval", unit="episode") as bar:
         for ep in range(episodes):

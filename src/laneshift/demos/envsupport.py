@@ -4,7 +4,7 @@ The demos package never hard-codes an environment: it takes a gymnasium id (or o
 laneshift's scenario short names) plus flat env kwargs. laneshift's own ids are registered by
 importing ``laneshift.actors.envs``; any other registered gymnasium id works as well.
 
-Contract floor (the shard format resolves env ids with it). May import: gymnasium,
+Contract floor (the shard format resolves env ids with it). Room: the contract (shared by every process). May import: gymnasium,
 ``laneshift.envspec``; ``make_env`` alone imports ``laneshift.actors.envs`` (by name, at call time:
 building an env is a tool's job, never the shard reader's).
 

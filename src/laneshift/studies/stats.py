@@ -12,7 +12,7 @@ understates the uncertainty when there are two seeds.
 - :func:`curves_on_grid`: per-run curves (already smoothed) put on a common x grid (env steps,
   wall-clock seconds) over the range every run covers, with their mean and bootstrap band.
 
-May import: numpy only (no laneshift component; the experiment commands import this).
+Room: the tools (studies). May import: numpy only (no laneshift component; the experiment commands import this).
 """
 
 from __future__ import annotations
