@@ -495,6 +495,7 @@ def _add_bench(sub: Any) -> None:
     from laneshift.bench.learner import register as register_bench_learner
     from laneshift.bench.p1 import register as register_bench_p1
     from laneshift.bench.replay import register as register_bench_replay
+    from laneshift.bench.report import register as register_bench_report
     from laneshift.bench.run import register as register_bench_run
     from laneshift.bench.shards import register as register_bench_shards
     from laneshift.bench.suite import register as register_bench_all
@@ -508,6 +509,7 @@ def _add_bench(sub: Any) -> None:
     register_bench_p1(bench_sub)
     register_bench_shards(bench_sub)
     register_bench_all(bench_sub)
+    register_bench_report(bench_sub)
 
 
 def leaf_parsers(parser: argparse.ArgumentParser) -> list[argparse.ArgumentParser]:

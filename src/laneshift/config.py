@@ -434,7 +434,7 @@ class DeployConfig:
     # by Ray. "launcher": a zenoh session in the launcher's own process, local mode only. A local
     # run's Ray processes all die with its launcher, so there an actor adds no supervision worth
     # its process: a Ray worker holding one zenoh session cost about 106 MB of the run's 1.24 GB
-    # peak memory (`laneshift bench run`; docs/performance.md). "auto": the launcher in local mode, an actor on a cluster.
+    # peak memory (`laneshift bench run`; docs/performance-log.md). "auto": the launcher in local mode, an actor on a cluster.
     router_in: Literal["auto", "actor", "launcher"] = "auto"
     # The address the router listens on and every client connects to. "" = the address Ray
     # registered for the router's node (``ray start --node-ip-address``), 127.0.0.1 in local mode.
@@ -458,7 +458,7 @@ class DeployConfig:
     # k >= 0: the learner's process runs on CPU k alone and every other component process of the
     # run on the node's other CPUs (os.sched_setaffinity), so the learner's update never waits for
     # a core the env workers hold (+25 % env steps/s on 2 cores: `laneshift bench run`, with
-    # --set deploy.learner_core=-1 and without; docs/performance.md).
+    # --set deploy.learner_core=-1 and without; docs/performance-log.md).
     # -1: no pinning. -2 (auto, the default): local mode pins the learner to the machine's last CPU
     # when the launcher may use two or more; a cluster run pins nothing (``resolve_learner_core``).
     learner_core: int = -2
