@@ -1,8 +1,8 @@
 """The floors of the house, checked on every import statement in the package (module level and
 inside functions), read with ``ast`` so nothing is imported to check it:
 
-- the contract (``laneshift.{wire, config, transport, envspec, nstep, qnet, progress, replay_stats}`` and the
-  demo shard format ``laneshift.demos.{shard, checksum, envsupport, framestack, outcomes}``)
+- the contract (the ``laneshift.wire`` package, ``laneshift.{config, transport, envspec, nstep, qnet,
+  progress, replay_stats}`` and the demo shard format ``laneshift.demos.{shard, checksum, envsupport, framestack, outcomes}``)
   imports nothing but the contract;
 - each component (``laneshift.actors``, ``laneshift.learner``, ``laneshift.replay_server``)
   imports the contract and itself, never another component, ``deploy`` or a tool;
@@ -31,7 +31,9 @@ ROOT = Path(__file__).resolve().parents[1]
 #: Where each package's files are (pyproject.toml's package-dir).
 PACKAGE_DIRS = {"laneshift": "src/laneshift", "laneshift.actors": "actors", "laneshift.learner": "learner",
                 "laneshift.replay_server": "replay_server", "laneshift.deploy": "deploy"}
-CONTRACT = {"laneshift", "laneshift.wire", "laneshift.config", "laneshift.transport", "laneshift.envspec",
+WIRE = {"laneshift.wire", *(f"laneshift.wire.{m}" for m in ("errors", "keys", "envelope", "batches", "fastpath",
+                                                             "transitions", "sampling", "weights", "json_messages"))}
+CONTRACT = {"laneshift", *WIRE, "laneshift.config", "laneshift.transport", "laneshift.envspec",
             "laneshift.nstep", "laneshift.qnet", "laneshift.progress", "laneshift.replay_stats", "laneshift.demos", "laneshift.demos.shard",
             "laneshift.demos.checksum", "laneshift.demos.envsupport", "laneshift.demos.framestack",
             "laneshift.demos.outcomes"}
