@@ -1,9 +1,9 @@
 """The floors of the house, checked on every import statement in the package (module level and
 inside functions), read with ``ast`` so nothing is imported to check it:
 
-- the contract (the ``laneshift.wire`` package, ``laneshift.{config, transport, envspec, nstep, qnet,
-  progress, replay_stats}`` and the demo shard format ``laneshift.demos.{shard, checksum, envsupport, framestack, outcomes}``)
-  imports nothing but the contract;
+- the contract (the ``laneshift.wire`` and ``laneshift.config`` packages, ``laneshift.{transport,
+  envspec, nstep, qnet, progress, replay_stats}`` and the demo shard format
+  ``laneshift.demos.{shard, checksum, envsupport, framestack, outcomes}``) imports nothing but the contract;
 - each component (``laneshift.actors``, ``laneshift.learner``, ``laneshift.replay_server``)
   imports the contract and itself, never another component, ``deploy`` or a tool;
 - ``laneshift.deploy`` (the builder and the launchers) imports the contract, the components and
@@ -33,7 +33,8 @@ PACKAGE_DIRS = {"laneshift": "src/laneshift", "laneshift.actors": "actors", "lan
                 "laneshift.replay_server": "replay_server", "laneshift.deploy": "deploy"}
 WIRE = {"laneshift.wire", *(f"laneshift.wire.{m}" for m in ("errors", "keys", "envelope", "batches", "fastpath",
                                                              "transitions", "sampling", "weights", "json_messages"))}
-CONTRACT = {"laneshift", *WIRE, "laneshift.config", "laneshift.transport", "laneshift.envspec",
+CONFIG = {"laneshift.config", "laneshift.config.sections", "laneshift.config.loading", "laneshift.config.methods"}
+CONTRACT = {"laneshift", *WIRE, *CONFIG, "laneshift.transport", "laneshift.envspec",
             "laneshift.nstep", "laneshift.qnet", "laneshift.progress", "laneshift.replay_stats", "laneshift.demos", "laneshift.demos.shard",
             "laneshift.demos.checksum", "laneshift.demos.envsupport", "laneshift.demos.framestack",
             "laneshift.demos.outcomes"}
