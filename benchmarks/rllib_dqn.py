@@ -42,7 +42,7 @@ import time
 
 SCENARIO = "straight"
 ENV_NAME = "laneshift-straight-vector"
-# laneshift's EnvConfig defaults (src/laneshift/config.py), written out: the env's constructor kwargs.
+# laneshift's EnvConfig defaults (src/laneshift/config/sections.py), written out: the env's constructor kwargs.
 ENV_KWARGS = {"observation": "vector", "reward_preset": 5, "initial_lane": "random", "action_set": "paper"}
 BATCH = 256
 TARGET_SYNC_UPDATES = 500  # laneshift LearnerConfig.target_update_period (in updates)

@@ -15,6 +15,8 @@ import numpy as np
 
 from laneshift import wire
 from laneshift.bench import replay as bench_replay
+from laneshift.bench.replay_harness import SAMPLE_BATCH, synthetic_message
+from laneshift.bench.replay_report import format_result
 from laneshift.deploy.processes import descendants
 
 
@@ -51,16 +53,16 @@ def test_bench_replay_json_end_to_end(capsys) -> None:
     for key in ("sample_under_saturating_ingest", "sample_under_paced_ingest"):
         lat = out[key]
         assert lat["n"] >= 5 and 0 < lat["p50_ms"] <= lat["p99_ms"] <= lat["max_ms"]
-    assert out["sample_idle"]["reply_bytes"] > bench_replay.SAMPLE_BATCH * 2 * 82 * 4
+    assert out["sample_idle"]["reply_bytes"] > SAMPLE_BATCH * 2 * 82 * 4
     assert set(out["met"]) == {"ingest_vector", "sample_p99"}
-    text = bench_replay.format_result(out)  # the text form renders from the same dict
+    text = format_result(out)  # the text form renders from the same dict
     assert "actor scaling" in text and "sample latency" in text
     assert descendants(os.getpid()) <= before  # every router, server and publisher was stopped
 
 
 def test_patched_messages_decode_with_their_counters() -> None:
     schema = wire.TransitionSchema((82,), "float32", 9)
-    patcher = bench_replay.synthetic_message("w3", schema, 4, np.random.default_rng(0))
+    patcher = synthetic_message("w3", schema, 4, np.random.default_rng(0))
     for seq in (0, 1, 99, 123_456_789):
         batch = wire.decode_transitions(patcher.build(seq, (seq + 1) * 4), schema)
         assert (batch.actor, batch.seq, batch.env_steps, len(batch)) == ("w3", seq, (seq + 1) * 4, 4)

@@ -104,17 +104,17 @@ def test_derive_bounds_p1_by_the_bare_loop_before_and_after_the_run():
     assert derive(r)["p1_bound_env_steps_per_s"] == 140.0 * 8 and derive(r)["p1_bound_resolved"] is False
 
 
-def test_bench_p1_flags_rounds_whose_bound_moved_and_summarises_the_rest(monkeypatch):
+def test_bench_run_vs_bound_flags_rounds_whose_bound_moved_and_summarises_the_rest(monkeypatch):
     """Bare loop 100, 104, 160, 158 around three runs: the middle round's bound moved 54 % and its
     fraction reads 1.14; it is listed, flagged, and left out of the resolved summary."""
-    from laneshift.bench import p1
+    from laneshift.bench import run_vs_bound
 
     bares = iter([100.0, 104.0, 160.0, 158.0])
     runs = iter([700.0, 1200.0, 1000.0])
-    monkeypatch.setattr(p1, "bare_updates_per_s", lambda seconds, said_by: next(bares))
-    monkeypatch.setattr(p1, "bench_run", lambda args: {"rc": 0, "steady_env_steps_per_s": (x := next(runs)),
-                                                       "training_env_steps_per_s": x})
-    r = p1.bench_p1(rounds=3, ratio=32.0)
+    monkeypatch.setattr(run_vs_bound, "bare_updates_per_s", lambda seconds, said_by: next(bares))
+    monkeypatch.setattr(run_vs_bound, "bench_run", lambda args: {"rc": 0, "steady_env_steps_per_s": (x := next(runs)),
+                                                                 "training_env_steps_per_s": x})
+    r = run_vs_bound.bench_run_vs_bound(rounds=3, ratio=32.0)
     assert [row["resolved"] for row in r["rounds"]] == [True, False, True]
     # 700 / (102 x 256 / 32), 1200 / (132 x 8), 1000 / (159 x 8)
     assert [row["steady_fraction"] for row in r["rounds"]] == [0.86, 1.14, 0.79]
@@ -122,5 +122,24 @@ def test_bench_p1_flags_rounds_whose_bound_moved_and_summarises_the_rest(monkeyp
     assert r["rounds_resolved"] == 2 and (resolved["min"], resolved["max"]) == (0.79, 0.86)
     assert resolved["median"] == pytest.approx(0.825)
     assert r["p1_steady_fraction"]["max"] == 1.14  # every round is still listed
-    text = p1.render(r)
+    text = run_vs_bound.render(r)
     assert "(!)" in text and "2 of 3" in text
+
+
+def test_bench_p1_is_a_hidden_old_name_that_says_the_new_one(monkeypatch, capsys):
+    """`laneshift bench p1` runs `bench run-vs-bound` after one line naming it, and `laneshift bench
+    --help` lists only the new name."""
+    from laneshift.bench import run_vs_bound
+    from laneshift.cli import build_parser
+
+    ran = []
+    monkeypatch.setattr(run_vs_bound, "bench_run_vs_bound", lambda *a: ran.append(a) or {"rounds": []})
+    monkeypatch.setattr(run_vs_bound, "render", lambda r: "rendered")
+    args = build_parser().parse_args(["bench", "p1", "--rounds", "3"])
+    assert args.func(args) == 0 and ran == [(3, 40_000, 32.0, "--workers 2", 3.0)]
+    out, err = capsys.readouterr()
+    assert err.splitlines() == ["laneshift bench p1 is now `laneshift bench run-vs-bound`"] and out == "rendered\n"
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["bench", "--help"])
+    listing = capsys.readouterr().out
+    assert "run-vs-bound" in listing and " p1 " not in listing

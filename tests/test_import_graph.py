@@ -1,14 +1,19 @@
 """The floors of the house, checked on every import statement in the package (module level and
 inside functions), read with ``ast`` so nothing is imported to check it:
 
-- the contract (``laneshift.{wire, config, transport, envspec, nstep, qnet, progress, replay_stats}`` and the
-  demo shard format ``laneshift.demos.{shard, checksum, envsupport, framestack, outcomes}``)
-  imports nothing but the contract;
+- the contract (the ``laneshift.wire`` and ``laneshift.config`` packages, ``laneshift.{transport,
+  envspec, nstep, qnet, progress, replay_stats}`` and the demo shard format
+  ``laneshift.demos.{shard, checksum, envsupport, framestack, outcomes}``) imports nothing but the contract;
 - each component (``laneshift.actors``, ``laneshift.learner``, ``laneshift.replay_server``)
   imports the contract and itself, never another component, ``deploy`` or a tool;
 - ``laneshift.deploy`` (the builder and the launchers) imports the contract, the components and
   the demo tools, never the studies, the benchmarks or the CLI;
 - the tools (``laneshift.cli``, ``studies``, ``bench``, the demo tools) may import anything;
+- every module is on a floor on purpose: one that is neither in the contract's list nor a component,
+  ``deploy`` or a named tool fails, so a new contract module cannot slip in as a tool;
+- inside the contract's two packages, ``laneshift.wire`` and ``laneshift.config``, each module imports
+  only the modules before it in the package's order (``PACKAGE_ORDER``; the package's own
+  ``__init__`` re-exports them, and no module imports it);
 - and no module imports itself through others: no circle of imports, however deep, counting
   every import statement (inside a function or under ``if TYPE_CHECKING:`` too), since an import
   deferred to hide a circle still ties the two modules together. A circle is designed out by
@@ -31,11 +36,21 @@ ROOT = Path(__file__).resolve().parents[1]
 #: Where each package's files are (pyproject.toml's package-dir).
 PACKAGE_DIRS = {"laneshift": "src/laneshift", "laneshift.actors": "actors", "laneshift.learner": "learner",
                 "laneshift.replay_server": "replay_server", "laneshift.deploy": "deploy"}
-CONTRACT = {"laneshift", "laneshift.wire", "laneshift.config", "laneshift.transport", "laneshift.envspec",
+#: The contract's packages, each module in its order: a module may import only those before it.
+PACKAGE_ORDER = {
+    "laneshift.wire": ("errors", "keys", "envelope", "batches", "fastpath", "transitions", "sampling", "weights",
+                       "json_messages"),
+    "laneshift.config": ("sections", "loading", "methods"),
+}
+CONTRACT = {"laneshift", *PACKAGE_ORDER, *(f"{p}.{m}" for p, order in PACKAGE_ORDER.items() for m in order),
+            "laneshift.transport", "laneshift.envspec",
             "laneshift.nstep", "laneshift.qnet", "laneshift.progress", "laneshift.replay_stats", "laneshift.demos", "laneshift.demos.shard",
             "laneshift.demos.checksum", "laneshift.demos.envsupport", "laneshift.demos.framestack",
             "laneshift.demos.outcomes"}
 COMPONENTS = ("actors", "learner", "replay_server")
+#: The tools: these modules and every module under these packages (the demo shard format excepted).
+TOOLS = {"laneshift.cli", "laneshift.argtypes", "laneshift.config_reference", "laneshift.__main__"}
+TOOL_PACKAGES = ("laneshift.studies", "laneshift.bench", "laneshift.demos")
 
 
 def floor(module: str) -> str:
@@ -211,6 +226,9 @@ def test_every_import_keeps_to_its_floor():
 
 def test_the_floors_are_what_the_rules_say():
     assert floor("laneshift.qnet") == "contract" and floor("laneshift.demos.shard") == "contract"
+    assert floor("laneshift.wire.fastpath") == "contract" and floor("laneshift.config.methods") == "contract"
+    assert not allowed("laneshift.wire.keys", "laneshift.actors.envs")
+    assert not allowed("laneshift.config.loading", "laneshift.bench.cpu_meter")
     assert floor("laneshift.demos.generate") == "tools" and floor("laneshift.studies.experiments") == "tools"
     assert not allowed("laneshift.actors.policy", "laneshift.learner.dqn")
     assert not allowed("laneshift.envspec", "laneshift.actors.envs")
@@ -218,6 +236,34 @@ def test_the_floors_are_what_the_rules_say():
     assert not allowed("laneshift.deploy.launch", "laneshift.studies.evaluate")
     assert allowed("laneshift.deploy.builder", "laneshift.learner.loop")
     assert allowed("laneshift.studies.experiments", "laneshift.deploy.local")
+
+
+def test_every_module_is_on_a_floor_on_purpose():
+    """A module that is not in the contract's list falls to the tools' floor, which may import
+    anything: so every one there must be a named tool, and every name in the lists a module."""
+    mods = modules()
+    stray = sorted(m for m in mods if floor(m) == "tools" and m not in TOOLS
+                   and not any(m == p or m.startswith(p + ".") for p in TOOL_PACKAGES))
+    assert not stray, ("modules on no floor (add them to CONTRACT or PACKAGE_ORDER, or to the tools): "
+                       + ", ".join(stray))
+    missing = sorted((CONTRACT | TOOLS) - set(mods))
+    assert not missing, "listed but not found (renamed or removed?): " + ", ".join(missing)
+
+
+def test_the_contract_packages_modules_import_only_those_before_them():
+    mods = modules()
+    known = set(mods)
+    bad = []
+    for package, order in PACKAGE_ORDER.items():
+        assert set(order) == {m.rsplit(".", 1)[1] for m in mods if m.startswith(package + ".")}, package
+        for i, name in enumerate(order):
+            module = f"{package}.{name}"
+            sites = import_sites(module, mods[module], known)
+            for target, line in sorted(sites.items()):
+                inside = target == package or target.startswith(package + ".")
+                if inside and target.rsplit(".", 1)[-1] not in order[:i]:
+                    bad.append(f"{module} imports {target} ({mods[module].relative_to(ROOT)}:{line})")
+    assert not bad, "a module of a contract package imports one after it, or the package itself:\n" + "\n".join(bad)
 
 
 def test_no_module_imports_itself_through_others():
@@ -260,6 +306,8 @@ def test_circles_are_found_however_deep():
     ("from laneshift.learner.dqn import DoubleDQN", {"laneshift.learner.dqn"}),
     ("def f():\n    from laneshift.learner import dqn", {"laneshift.learner", "laneshift.learner.dqn"}),
     ("import laneshift.wire", {"laneshift.wire"}),
+    ("import laneshift.wire.envelope as envelope", {"laneshift.wire.envelope"}),  # not the package
+    ("from . import envelope", {"laneshift.replay_server", "laneshift.replay_server.envelope"}),
     ("from .frames import FrameStore", {"laneshift.replay_server.frames"}),
     ("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from ..learner.dqn import DoubleDQN",
      {"laneshift.learner.dqn"}),
@@ -267,7 +315,8 @@ def test_circles_are_found_however_deep():
 def test_imports_are_found_at_module_level_and_inside_functions(tmp_path, text, expected):
     path = tmp_path / "x.py"
     path.write_text(text)
-    known = {"laneshift.learner.dqn", "laneshift.learner", "laneshift.wire", "laneshift.replay_server.frames"}
+    known = {"laneshift.learner.dqn", "laneshift.learner", "laneshift.wire", "laneshift.wire.envelope",
+             "laneshift.replay_server", "laneshift.replay_server.envelope", "laneshift.replay_server.frames"}
     assert imports_of("laneshift.replay_server.x", path, known) == expected
 
 

@@ -54,6 +54,8 @@ from laneshift.wire import (
     safetensors_dumps,
     safetensors_loads,
 )
+from laneshift.wire import envelope as envelope_module
+from laneshift.wire.batches import BATCH_FIELDS
 
 SCHEMA = TransitionSchema(obs_shape=(3,), obs_dtype="float32", n_actions=9)
 FUZZ = settings(derandomize=True, database=None, deadline=None, max_examples=300,
@@ -296,7 +298,7 @@ def test_batch_round_trip():
     b = _sampled()
     out = decode_batch(encode_batch(b), SCHEMA)
     assert out.num_batches == 2 and out.info == {"phase": 1}
-    for f in wire._BATCH_FIELDS:
+    for f in BATCH_FIELDS:
         assert np.array_equal(getattr(out, f), getattr(b, f)) and getattr(out, f).dtype == getattr(b, f).dtype
 
 
@@ -443,14 +445,14 @@ def test_trailing_bytes():
 
 def test_oversized(monkeypatch):
     msg = encode_transitions(make_batch())
-    monkeypatch.setattr(wire, "MAX_MESSAGE_BYTES", len(msg) - 1)
+    monkeypatch.setattr(envelope_module, "MAX_MESSAGE_BYTES", len(msg) - 1)
     assert reason_of(decode_transitions, msg, SCHEMA) == "oversized"
-    monkeypatch.setattr(wire, "MAX_MESSAGE_BYTES", len(msg))
+    monkeypatch.setattr(envelope_module, "MAX_MESSAGE_BYTES", len(msg))
     decode_transitions(msg, SCHEMA)
 
 
 def test_oversized_checked_before_anything_else(monkeypatch):
-    monkeypatch.setattr(wire, "MAX_MESSAGE_BYTES", 4)
+    monkeypatch.setattr(envelope_module, "MAX_MESSAGE_BYTES", 4)
     assert reason_of(decode, b"garbage") == "oversized"
 
 
@@ -819,7 +821,7 @@ def test_sample_request_bad_fields(patch):
 
 def test_batch_validation():
     good = _sampled()
-    arrays = {f: getattr(good, f) for f in wire._BATCH_FIELDS}
+    arrays = {f: getattr(good, f) for f in BATCH_FIELDS}
     msg = lambda header, arrs: encode(Kind.BATCH, header, arrs)  # noqa: E731
     assert reason_of(decode_batch, msg({"num_batches": 1}, {k: v for k, v in arrays.items() if k != "weight"}),
                      SCHEMA) == "bad_arrays"
@@ -839,7 +841,7 @@ def test_batch_with_scalar_action_is_a_wire_error():
     """An ``action`` of shape ``[]`` is WireError("bad_shape"): ``decode_batch`` checks
     ``action.ndim == 1`` before it reads the row count from it (an IndexError there would escape
     the learner's ``ReplayClient.sample``, which catches only WireError)."""
-    specs = [{"name": n, "dtype": "<i8", "shape": []} for n in wire._BATCH_FIELDS]
+    specs = [{"name": n, "dtype": "<i8", "shape": []} for n in BATCH_FIELDS]
     assert reason_of(decode_batch, envelope(4, {"num_batches": 1, "arrays": specs}, b"\0" * 8 * len(specs)), SCHEMA) == "bad_shape"
 
 

@@ -1,6 +1,7 @@
-"""The wire's fast paths (``wire._fast_transitions``, ``_fast_batch``, ``_fast_encode_batch``) against
-the generic checks: same results on every valid message, and never a message accepted that the
-generic path refuses (mutated messages, hand-made headers, values at the edges).
+"""The wire's fast paths (``laneshift.wire.fastpath``: ``fast_transitions``, ``fast_batch``,
+``fast_encode_batch``) against the generic checks: same results on every valid message, and never a
+message accepted that the generic path refuses (mutated messages, hand-made headers, values at the
+edges).
 
 Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
 the code under test needs.
@@ -19,6 +20,9 @@ from hypothesis import strategies as st
 from laneshift import wire
 from laneshift.wire import (MAGIC, WIRE_VERSION, Kind, SampledBatch, TransitionBatch, TransitionSchema, WireError,
                             decode_batch, decode_transitions, encode, encode_batch, encode_transitions)
+from laneshift.wire import fastpath, sampling
+from laneshift.wire import transitions as transitions_codec
+from laneshift.wire.batches import BATCH_FIELDS
 
 FUZZ = settings(derandomize=True, database=None, deadline=None, max_examples=300,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
@@ -56,7 +60,7 @@ def same(a: TransitionBatch, b: TransitionBatch) -> None:
 
 def generic_or_reason(data: bytes, schema: TransitionSchema) -> TransitionBatch | str:
     try:
-        return wire._checked_transitions(data, schema)
+        return transitions_codec._checked_transitions(data, schema)
     except WireError as exc:
         return exc.reason
 
@@ -66,7 +70,7 @@ def check_subset(data: bytes, schema: TransitionSchema) -> None:
     decoder's answer (batch or reason) is the generic one."""
     generic = generic_or_reason(data, schema)
     for copy in (True, False):
-        fast = wire._fast_transitions(data, schema, copy)
+        fast = fastpath.fast_transitions(data, schema, copy)
         if fast is not None:
             assert not isinstance(generic, str), f"fast path accepted what the generic path refuses: {generic}"
             same(fast, generic)
@@ -84,12 +88,12 @@ def check_subset(data: bytes, schema: TransitionSchema) -> None:
 @pytest.mark.parametrize("rows", [1, 2, 7, 32, 256])
 def test_canonical_messages_take_the_fast_path_with_the_generic_result(schema, rows):
     data = encode_transitions(batch_for(schema, rows, extra={"episode": [1, 2]}))
-    views = wire._fast_transitions(data, schema, copy=False)
+    views = fastpath.fast_transitions(data, schema, copy=False)
     assert views is not None
-    same(views, wire._checked_transitions(data, schema))
-    copied = wire._fast_transitions(data, schema, copy=True)
+    same(views, transitions_codec._checked_transitions(data, schema))
+    copied = fastpath.fast_transitions(data, schema, copy=True)
     # A copy is made in one block only where every array lands aligned in it; else the generic path copies.
-    assert (copied is not None) == wire._transitions_layout(schema, rows).aligned
+    assert (copied is not None) == fastpath._transitions_layout(schema, rows).aligned
     same(decode_transitions(data, schema), views)
     for arr in (decode_transitions(data, schema).obs, decode_transitions(data, schema).action):
         assert arr.flags.aligned and arr.flags.writeable
@@ -182,8 +186,8 @@ def test_hand_made_headers_around_the_fixed_table():
     }
     for name, text in cases.items():
         check_subset(with_header(data, text), schema)
-    assert wire._fast_transitions(with_header(data, "{" + table), schema, True) is None
-    assert wire._fast_transitions(with_header(data, "{ " + table), schema, True) is None
+    assert fastpath.fast_transitions(with_header(data, "{" + table), schema, True) is None
+    assert fastpath.fast_transitions(with_header(data, "{ " + table), schema, True) is None
     with pytest.raises(WireError):
         decode_transitions(with_header(data, "{" + table), schema)
 
@@ -196,7 +200,7 @@ def test_large_finite_values_are_accepted_and_non_finite_refused(obs_dtype):
     big = np.finfo(obs_dtype).max
     obs = np.full((8, 64), big, obs_dtype)
     data = encode_transitions(batch_for(schema, 8, obs=obs, next_obs=-obs))
-    assert wire._fast_transitions(data, schema, True) is not None
+    assert fastpath.fast_transitions(data, schema, True) is not None
     for bad in (np.nan, np.inf, -np.inf):
         for field in ("obs", "next_obs"):
             arr = obs.copy()
@@ -241,9 +245,9 @@ def test_value_rules_on_the_fast_path():
 
 def test_layout_cache_stays_bounded():
     schema = SCHEMAS[0]
-    for rows in range(1, wire._MAX_LAYOUTS + 40):
-        assert wire._fast_transitions(encode_transitions(batch_for(schema, rows)), schema, False) is not None
-        assert len(wire._LAYOUTS) <= wire._MAX_LAYOUTS
+    for rows in range(1, fastpath._MAX_LAYOUTS + 40):
+        assert fastpath.fast_transitions(encode_transitions(batch_for(schema, rows)), schema, False) is not None
+        assert len(fastpath._LAYOUTS) <= fastpath._MAX_LAYOUTS
 
 
 # --------------------------------------------------------------------------- batches
@@ -260,7 +264,7 @@ def sampled(schema: TransitionSchema, rows: int, nb: int = 1, seed: int = 0) -> 
 
 def generic_encode(batch: SampledBatch) -> bytes:
     return encode(Kind.BATCH, {"num_batches": batch.num_batches, "info": batch.info},
-                  {k: getattr(batch, k) for k in wire._BATCH_FIELDS})
+                  {k: getattr(batch, k) for k in BATCH_FIELDS})
 
 
 @pytest.mark.parametrize("schema", SCHEMAS, ids=lambda s: f"{s.obs_dtype}{s.obs_shape}")
@@ -268,15 +272,15 @@ def generic_encode(batch: SampledBatch) -> bytes:
 def test_batch_fast_paths_match_the_generic_ones(schema, rows, nb):
     batch = sampled(schema, rows, nb)
     data = encode_batch(batch)
-    assert wire._fast_encode_batch(batch) == data == generic_encode(batch)
-    fast = wire._fast_batch(data, schema)
+    assert fastpath.fast_encode_batch(batch) == data == generic_encode(batch)
+    fast = fastpath.fast_batch(data, schema)
     # One block copy only where every array lands aligned in it (the learner hands them to torch).
-    assert (fast is not None) == wire._batch_layout(schema.obs_shape, schema.obs_dtype, rows).aligned
+    assert (fast is not None) == fastpath._batch_layout(schema.obs_shape, schema.obs_dtype, rows).aligned
     if fast is None:
         return
-    slow = wire._checked_batch(data, schema)
+    slow = sampling._checked_batch(data, schema)
     assert fast.num_batches == slow.num_batches == nb and fast.info == slow.info
-    for k in wire._BATCH_FIELDS:
+    for k in BATCH_FIELDS:
         x, y = getattr(fast, k), getattr(slow, k)
         assert x.dtype == y.dtype and x.shape == y.shape and np.array_equal(x, y), k
         assert x.flags.writeable and x.flags.aligned
@@ -296,7 +300,7 @@ def test_a_batch_of_record_fields_encodes_as_its_columns():
     data = encode_batch(views)
     assert data == generic_encode(batch) == encode_batch(batch)
     back = wire.decode_batch(data, schema)
-    for k in wire._BATCH_FIELDS:
+    for k in BATCH_FIELDS:
         assert np.array_equal(getattr(back, k), getattr(batch, k)), k
 
 
@@ -325,13 +329,13 @@ def test_property_mutated_batches(rows, nb, mutations):
         data[lo + pos % max(hi - lo, 1)] = value
     data = bytes(data)
     try:
-        slow: SampledBatch | str = wire._checked_batch(data, schema)
+        slow: SampledBatch | str = sampling._checked_batch(data, schema)
     except WireError as exc:
         slow = exc.reason
-    fast = wire._fast_batch(data, schema)
+    fast = fastpath.fast_batch(data, schema)
     if fast is not None:
         assert not isinstance(slow, str), slow
-        for k in wire._BATCH_FIELDS:
+        for k in BATCH_FIELDS:
             assert np.array_equal(getattr(fast, k), getattr(slow, k), equal_nan=True)
     try:
         public: SampledBatch | str = decode_batch(data, schema)
@@ -349,7 +353,7 @@ def test_batch_rules_on_the_fast_path():
                  head.replace('"num_batches":2', '"num_batches":2.0')):
         hlen = struct.unpack_from("<I", data, 8)[0]
         msg = struct.pack("<4sHBBI", MAGIC, WIRE_VERSION, 4, 0, len(text)) + text.encode() + data[12 + hlen:]
-        assert wire._fast_batch(msg, schema) is None
+        assert fastpath.fast_batch(msg, schema) is None
         with pytest.raises(WireError):
             decode_batch(msg, schema)
     steps0 = sampled(schema, 6, 2)

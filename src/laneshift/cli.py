@@ -493,10 +493,10 @@ def _add_bench(sub: Any) -> None:
     bench_sub = bench.add_subparsers(dest="bench_cmd", required=True, metavar="WHAT")
     from laneshift.bench.env import register as register_bench_env
     from laneshift.bench.learner import register as register_bench_learner
-    from laneshift.bench.p1 import register as register_bench_p1
     from laneshift.bench.replay import register as register_bench_replay
     from laneshift.bench.report import register as register_bench_report
     from laneshift.bench.run import register as register_bench_run
+    from laneshift.bench.run_vs_bound import register as register_bench_run_vs_bound
     from laneshift.bench.shards import register as register_bench_shards
     from laneshift.bench.suite import register as register_bench_all
     from laneshift.bench.worker import register as register_bench_worker
@@ -506,7 +506,7 @@ def _add_bench(sub: Any) -> None:
     register_bench_learner(bench_sub)
     register_bench_run(bench_sub)
     register_bench_worker(bench_sub)
-    register_bench_p1(bench_sub)
+    register_bench_run_vs_bound(bench_sub)
     register_bench_shards(bench_sub)
     register_bench_all(bench_sub)
     register_bench_report(bench_sub)

@@ -3,7 +3,7 @@
 What runs is the topology `laneshift train --local` gives users: a `laneshift router` process and
 a `laneshift replay-server` process as its client (straight scenario, vector or grayscale
 observations, ``replay.samples_per_insert 0`` so the rate limiter never throttles, ``min_size 1``).
-Synthetic actors are separate OS processes (this module's ``_publish`` entry point), each a zenoh
+Synthetic actors are separate OS processes (``laneshift.bench.replay_publisher``), each a zenoh
 client publishing pre-encoded TRANSITIONS messages (``wire.encode_transitions``, valid per-actor
 ``seq``) with ``CongestionControl.BLOCK`` as fast as it can, several actor keys per process.
 
@@ -23,6 +23,10 @@ Measured:
     laneshift bench replay                      # text
     laneshift bench replay --duration 5 --json  # one JSON object
 
+The pieces: this module (the command and the measurements), ``replay_publisher`` (a synthetic-actor
+process), ``replay_harness`` (synthetic messages, timing; shared with ``bench shards``),
+``cpu_meter`` (CPU per process) and ``replay_report`` (the text form).
+
 Room: the tools (benchmarks). May import: anything in laneshift.
 """
 
@@ -34,37 +38,25 @@ import json
 import os
 import shutil
 import signal
-import socket
-import struct
 import sys
 import tempfile
 import threading
 import time
 from pathlib import Path
-from typing import Any, Callable, TextIO
-
-import numpy as np
+from typing import Any, TextIO
 
 from laneshift import transport, wire
 from laneshift.config import ReplayConfig, TransportConfig
 from laneshift.progress import progress
 from laneshift.progress import write as progress_write
 
+from .cpu_meter import CpuMeter
+from .replay_harness import SAMPLE_BATCH, BenchError, time_calls, wait_for_router
+from .replay_report import format_result
+
 TARGET_INGEST_VECTOR_PER_S = 200_000
 TARGET_SAMPLE_P99_MS = 5.0
-SAMPLE_BATCH = 256
 FILL_TIMEOUT_S = 300
-DRAIN_S = 0.1  # publisher: pause between its last put and closing the session (none lost without it, measured)
-# Placeholders written by wire.encode_transitions, then overwritten in place with the real values
-# padded by spaces to the same width (JSON allows whitespace after a number), so each message costs
-# one join instead of a full encode. 16 digits, below the wire's 2**53 bound for header integers.
-_SEQ_MARK = 1_111_111_111_111_111
-_STEPS_MARK = 2_222_222_222_222_222
-_MARK_WIDTH = 16
-
-
-class BenchError(RuntimeError):
-    pass
 
 
 # ----------------------------------------------------------------------------- CLI
@@ -132,196 +124,7 @@ def main(argv: list[str] | None = None) -> int:
     return run(parser.parse_args(argv))
 
 
-# ----------------------------------------------------------------------------- synthetic publisher
-
-
-class _Patcher:
-    """A pre-encoded TRANSITIONS message whose ``seq`` and ``env_steps`` can be rewritten cheaply."""
-
-    def __init__(self, message: bytes):
-        (hlen,) = struct.unpack_from("<I", message, 8)
-        end = 12 + hlen
-        marks = []
-        for field, mark in (("seq", _SEQ_MARK), ("env_steps", _STEPS_MARK)):
-            needle = f'"{field}":{mark}'.encode()
-            pos = message.find(needle, 0, end)
-            if pos < 0 or message.find(needle, pos + 1, end) >= 0:
-                raise BenchError(f"placeholder for {field} not found exactly once in the header")
-            marks.append((pos + len(needle) - _MARK_WIDTH, field))
-        marks.sort()
-        self.order = [f for _, f in marks]
-        (a, _), (b, _) = marks
-        self.pieces = (message[:a], message[a + _MARK_WIDTH:b], message[b + _MARK_WIDTH:])
-
-    def build(self, seq: int, env_steps: int) -> bytes:
-        vals = {"seq": seq, "env_steps": env_steps}
-        p0, p1, p2 = self.pieces
-        return b"".join((p0, b"%-16d" % vals[self.order[0]], p1, b"%-16d" % vals[self.order[1]], p2))
-
-
-MESSAGES_PER_ACTOR = 4
-
-
-def synthetic_message(actor: str, schema: wire.TransitionSchema, rows: int, rng: np.random.Generator) -> _Patcher:
-    """Random but valid transitions for ``schema``, encoded once with placeholder counters."""
-    shape = (rows, *schema.obs_shape)
-    dtype = np.dtype(schema.obs_dtype)
-    if dtype.kind == "f":
-        obs = rng.standard_normal(shape).astype(dtype)
-        next_obs = rng.standard_normal(shape).astype(dtype)
-    elif len(schema.obs_shape) == 3:  # a frame-stacking env's stream: each item one new frame
-        stack = schema.obs_shape[0]
-        frames = rng.integers(0, 256, size=(rows + stack, *schema.obs_shape[1:]), dtype=np.uint8).astype(dtype)
-        obs = np.stack([frames[i:i + stack] for i in range(rows)])
-        next_obs = np.stack([frames[i + 1:i + 1 + stack] for i in range(rows)])
-    else:
-        obs = rng.integers(0, 256, size=shape, dtype=np.uint8).astype(dtype)
-        next_obs = rng.integers(0, 256, size=shape, dtype=np.uint8).astype(dtype)
-    batch = wire.TransitionBatch.from_arrays(
-        actor=actor, seq=_SEQ_MARK, weights_version=0, phase=0, env_steps=_STEPS_MARK, obs=obs,
-        action=rng.integers(0, schema.n_actions, size=rows), reward=rng.standard_normal(rows).astype(np.float32),
-        next_obs=next_obs, terminated=(rng.random(rows) < 0.02).astype(np.uint8), truncated=np.zeros(rows, np.uint8))
-    patcher = _Patcher(wire.encode_transitions(batch))
-    check = wire.decode_transitions(patcher.build(7, 7 * rows), schema)  # the patched form is a valid message
-    if check.seq != 7 or check.env_steps != 7 * rows or check.actor != actor:
-        raise BenchError("patched message does not decode to the values written")
-    return patcher
-
-
-def _publisher_main(argv: list[str]) -> int:
-    """One synthetic-actor process: publishes for every actor key given, round robin, until SIGTERM."""
-    p = argparse.ArgumentParser(prog="python -m laneshift.bench.replay _publish")
-    p.add_argument("--router", required=True)
-    p.add_argument("--run-id", required=True)
-    p.add_argument("--actors", required=True, help="comma-separated actor names")
-    p.add_argument("--batch", type=int, required=True)
-    p.add_argument("--obs-shape", required=True, help="e.g. 67 or 4,100,100")
-    p.add_argument("--obs-dtype", required=True)
-    p.add_argument("--n-actions", type=int, required=True)
-    p.add_argument("--ready", required=True)
-    p.add_argument("--go", required=True, help="publishing starts once this file exists")
-    p.add_argument("--report", required=True)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--rate", type=float, default=0.0, help="transitions/s for this process (0 = as fast as possible)")
-    a = p.parse_args(argv)
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
-    schema = wire.TransitionSchema(tuple(int(d) for d in a.obs_shape.split(",")), a.obs_dtype, a.n_actions)
-    actors = a.actors.split(",")
-    rng = np.random.default_rng(a.seed)
-    # A few distinct messages per actor, sent in turn: a frame table (replay_server/frames.py) then
-    # finds each message's frames new, as with a real env, not remembered from the last send.
-    patchers = [[synthetic_message(actor, schema, a.batch, rng) for _ in range(MESSAGES_PER_ACTOR)]
-                for actor in actors]
-    sent = [0] * len(actors)
-    rows = a.batch
-    with transport.open_session(TransportConfig(router=a.router, run_id=a.run_id)) as session:
-        pubs = [transport.data_publisher(session, wire.transitions_key(a.run_id, actor)) for actor in actors]
-        # Until the server's subscription is known (a put before that goes nowhere), or we are stopped.
-        matched = transport.wait_for(lambda: stop.is_set() or all(p.matching_status.matching for p in pubs), 60,
-                                     interval_s=0.01)
-        if not matched or stop.is_set():
-            print("publisher: no matching subscriber", file=sys.stderr, flush=True)
-            return 3
-        Path(a.ready).write_text("ready")
-        # Start barrier: wait until the bench says go, so no publisher that started faster than the
-        # others sends before the window's opening stats are taken (on a cold machine one publisher
-        # filled a small table alone before the second one was ready: an empty window).
-        parent = os.getppid()
-        go, deadline = Path(a.go), time.monotonic() + 120
-        while not go.exists():
-            if stop.is_set() or os.getppid() != parent or time.monotonic() > deadline:
-                return 0 if stop.is_set() else 3
-            time.sleep(0.005)
-        t0 = time.monotonic()
-        total = 0
-        while not stop.is_set():
-            if os.getppid() != parent:  # the bench died without stopping us
-                break
-            for k in range(len(pubs)):
-                s = sent[k]
-                pubs[k].put(patchers[k][s % MESSAGES_PER_ACTOR].build(s, (s + 1) * rows))
-                sent[k] = s + 1
-                total += rows
-                if a.rate > 0:  # paced: sleep until this message's slot
-                    ahead = t0 + total / a.rate - time.monotonic()
-                    if ahead > 0:
-                        stop.wait(ahead)
-        elapsed = time.monotonic() - t0
-        report = {"actors": {actor: {"batches": n, "items": n * rows} for actor, n in zip(actors, sent)},
-                  "elapsed_s": elapsed}
-        Path(a.report).write_text(json.dumps(report))
-        time.sleep(DRAIN_S)  # let zenoh's transmit queue drain before the session closes
-    return 0
-
-
-# ----------------------------------------------------------------------------- CPU accounting
-
-
-_CLK = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
-
-
-def _proc_cpu_s(pid: int) -> float | None:
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            fields = f.read().rsplit(")", 1)[1].split()
-        return (int(fields[11]) + int(fields[12])) / _CLK  # utime + stime
-    except (OSError, IndexError, ValueError):
-        return None
-
-
-def _machine_busy_s() -> float | None:
-    try:
-        with open("/proc/stat") as f:
-            vals = [int(v) for v in f.readline().split()[1:]]
-        return (sum(vals[:8]) - vals[3] - vals[4]) / _CLK  # everything but idle and iowait
-    except (OSError, IndexError, ValueError):
-        return None
-
-
-class _CpuMeter:
-    """Cores used per role (server, router, publishers, bench) and by the whole machine."""
-
-    def __init__(self, roles: dict[str, list[int]]):
-        self.roles = {**roles, "bench": [os.getpid()]}
-        self.t0 = time.monotonic()
-        self.start = self._snap()
-
-    def _snap(self) -> dict[str, float | None]:
-        out: dict[str, float | None] = {}
-        for role, pids in self.roles.items():
-            vals = [_proc_cpu_s(pid) for pid in pids]
-            out[role] = None if any(v is None for v in vals) else sum(vals)  # type: ignore[arg-type]
-        out["machine"] = _machine_busy_s()
-        return out
-
-    def cores(self) -> dict[str, float | None]:
-        end, wall = self._snap(), time.monotonic() - self.t0
-        res = {k: (None if end[k] is None or self.start[k] is None else round((end[k] - self.start[k]) / wall, 2))
-               for k in end}
-        ours = [res[k] for k in self.roles]
-        if res["machine"] is not None and all(v is not None for v in ours):
-            res["other"] = round(max(0.0, res["machine"] - sum(ours)), 2)  # type: ignore[operator]
-        return res
-
-
 # ----------------------------------------------------------------------------- the benchmark
-
-
-def wait_for_router(endpoint: str, check_alive: Callable[[], None], timeout_s: float = 60.0) -> None:
-    """A zenoh client retries forever: make sure the router listens before opening a session."""
-    host, port = endpoint.split("/", 1)[1].rsplit(":", 1)
-    deadline = time.monotonic() + timeout_s
-    while True:
-        check_alive()
-        try:
-            socket.create_connection((host, int(port)), timeout=1).close()
-            return
-        except OSError:
-            if time.monotonic() > deadline:
-                raise BenchError(f"the router did not listen on {endpoint} within {timeout_s:g} s") from None
-            time.sleep(0.05)
 
 
 class _Bench:
@@ -422,7 +225,7 @@ class _Bench:
             self.n_pub += 1
             tag = f"pub{self.n_pub}"
             ready, report, go = self.work / f"{tag}.ready", self.work / f"{tag}.json", self.work / f"{tag}.go"
-            argv = [sys.executable, "-m", "laneshift.bench.replay", "_publish", "--router", self.endpoint,
+            argv = [sys.executable, "-m", "laneshift.bench.replay_publisher", "--router", self.endpoint,
                     "--run-id", run_id, "--actors", ",".join(names[j::count]), "--batch", str(self.args.batch),
                     "--obs-shape", ",".join(map(str, schema.obs_shape)), "--obs-dtype", schema.obs_dtype,
                     "--n-actions", str(schema.n_actions), "--ready", str(ready), "--go", str(go), "--report", str(report),
@@ -515,7 +318,7 @@ class _Bench:
                 self.go(pubs)
                 time.sleep(a.warmup)
             self.check_alive()
-            meter = _CpuMeter({"server": [self.group.procs[run_id].pid], "router": [self.group.procs["router"].pid],
+            meter = CpuMeter({"server": [self.group.procs[run_id].pid], "router": [self.group.procs["router"].pid],
                                "publishers": [p["proc"].pid for p in pubs]})
             s0 = self.stats(run_id)
             if fill_to is not None:  # first fill: the window opens before the first transition is sent
@@ -586,20 +389,6 @@ class _Bench:
         reply = transport.query(self.session, key, req, 10.0) or b""
         return {**timed, "reply_bytes": len(reply)}
 
-
-def time_calls(once: Callable[[], float], duration: float, warmup_n: int, min_n: int) -> dict:
-    """``once()`` (which returns its own seconds) ``warmup_n`` times untimed, then for ``duration``
-    seconds and at least ``min_n`` times: count, p50, p99, mean and max in ms."""
-    for _ in range(warmup_n):
-        once()
-    times: list[float] = []
-    end = time.perf_counter() + duration
-    while time.perf_counter() < end or len(times) < min_n:
-        times.append(once())
-    ms = np.array(times) * 1e3
-    return {"n": len(times), "p50_ms": round(float(np.percentile(ms, 50)), 3),
-            "p99_ms": round(float(np.percentile(ms, 99)), 3), "mean_ms": round(float(ms.mean()), 3),
-            "max_ms": round(float(ms.max()), 3)}
 
 
 def _zenoh_version() -> str:
@@ -710,72 +499,5 @@ def bench(args: argparse.Namespace, log: TextIO = sys.stderr) -> dict:
             print(f"[bench replay] failed; logs kept in {work / 'logs'}", file=log, flush=True)
 
 
-def _cores(c: dict) -> str:
-    f = lambda k: "-" if c.get(k) is None else f"{c[k]:.2f}"  # noqa: E731
-    return f"{f('server')}/{f('router')}/{f('publishers')}/{f('other')}"
-
-
-def _loaded_lines(r: dict) -> list[str]:
-    out = []
-    for key, what in (("sample_under_paced_ingest", "2 actors paced to {:,.0f}/s"),
-                      ("sample_under_saturating_ingest", "2 actors flat out")):
-        x = r.get(key)
-        if x is None:
-            continue
-        label = what.format(x.get("offered_per_s", 0)) + ":"
-        out.append(f"  {label:33s} p50 {x['p50_ms']:.2f} ms  p99 {x['p99_ms']:.2f} ms  max {x['max_ms']:.1f} ms  "
-                   f"(n={x['n']}; stored meanwhile {x['ingest_meanwhile']['ingest_per_s']:,.0f} /s)")
-    return out
-
-
-def format_result(r: dict) -> str:
-    if "ingest_grayscale" not in r:  # --no-grayscale: the same lines, grayscale figures as 0
-        zero = {"ingest_per_s": 0.0, "lost_batches": 0, "rejected": 0, "never_stored": 0, "cores": {}}
-        r = {**r, "ingest_grayscale": zero, "fill_grayscale": zero, "ingest_grayscale_per_s": 0.0,
-             "bytes_per_transition_grayscale": 0.0, "grayscale_obs": {"shape": ["-"], "dtype": "skipped"}}
-    cfg, v, g = r["config"], r["ingest_vector"], r["ingest_grayscale"]
-    yes = lambda ok: "met" if ok else "NOT met"  # noqa: E731
-    vs, gs = "x".join(map(str, r["vector_obs"]["shape"])), "x".join(map(str, r["grayscale_obs"]["shape"]))
-    lines = [
-        f"replay bench: {cfg['topology']}; zenoh {cfg['zenoh']}, {cfg['cpus']} cpus, loopback",
-        f"  {cfg['duration_s']:g} s per window after {cfg['warmup_s']:g} s warm-up, {cfg['batch']} transitions per "
-        f"message, actors spread over {cfg['publisher_processes']} publisher processes, CongestionControl.BLOCK",
-        "",
-        "ingest (transitions stored by the server per second, 2 actors, steady state)",
-        f"  vector    {r['vector_obs']['dtype']} ({vs}): {r['ingest_vector_per_s']:>10,.0f} /s   "
-        f"target >= {r['targets']['ingest_vector_per_s']:,}: {yes(r['met']['ingest_vector'])}",
-        f"  grayscale {r['grayscale_obs']['dtype']} ({gs}): {r['ingest_grayscale_per_s']:>8,.0f} /s   "
-        f"({r['ingest_grayscale_per_s'] * r['bytes_per_transition_grayscale'] / 1e6:,.0f} MB/s stored)",
-        f"  first fill of the table (every write on a fresh page): vector {r['fill_vector']['ingest_per_s']:,.0f} /s, "
-        f"grayscale {r['fill_grayscale']['ingest_per_s']:,.0f} /s; the rates above are after it (ring wrapping)",
-        f"  lost batches {v['lost_batches']} / {g['lost_batches']}, rejected {v['rejected']} / {g['rejected']}, "
-        f"sent but never stored {v['never_stored']} / {g['never_stored']} (vector / grayscale)",
-        "",
-        f"sample latency, SampleRequest({cfg['sample_batch']}) on vector data, query to decoded batch",
-        f"  {'idle server:':33s} p50 {r['sample_p50_ms']:.2f} ms  p99 {r['sample_p99_ms']:.2f} ms  "
-        f"(n={r['sample_idle']['n']}, reply {r['sample_idle']['reply_bytes']:,} B)   "
-        f"target p99 <= {r['targets']['sample_p99_ms']:g} ms: {yes(r['met']['sample_p99'])}",
-        *_loaded_lines(r),
-        "",
-        f"memory per stored transition (online table bytes / capacity): "
-        f"vector {r['bytes_per_transition_vector']:,.0f} B, grayscale {r['bytes_per_transition_grayscale']:,.0f} B",
-        "",
-        "actor scaling (vector): cores = server/router/publishers/other processes on the machine",
-        f"  {'actors':>6s} {'transitions/s':>14s} {'us/transition':>14s} {'server CPU us/tr':>16s} {'msgs/s':>9s} "
-        f"{'lost':>5s} {'rejected':>8s} {'never stored':>12s}  cores",
-    ]
-    for row in r["actor_scaling"]:
-        us = "-" if row["us_per_transition"] is None else f"{row['us_per_transition']:.2f}"
-        cpu = "-" if row["server_cpu_us_per_transition"] is None else f"{row['server_cpu_us_per_transition']:.2f}"
-        lines.append(f"  {row['actors']:>6d} {row['ingest_per_s']:>14,.0f} {us:>14s} {cpu:>16s} "
-                     f"{row['messages_per_s']:>9,.0f} {row['lost_batches']:>5d} {row['rejected']:>8d} "
-                     f"{str(row['never_stored']):>12s}  {_cores(row['cores'])}")
-    lines.append(f"\ncores during the 2-actor vector window: {_cores(v['cores'])}; grayscale: {_cores(g['cores'])}")
-    lines.append(f"total wall time {r['wall_s']:.0f} s")
-    return "\n".join(lines)
-
-
 if __name__ == "__main__":
-    if len(sys.argv) > 1 and sys.argv[1] == "_publish":
-        raise SystemExit(_publisher_main(sys.argv[2:]))
     raise SystemExit(main(sys.argv[1:]))

@@ -4,7 +4,7 @@ What runs is what ``laneshift train`` with ``replay.shards`` N gives users: one 
 process and N ``laneshift replay-server --shard i`` processes (vector observations of the straight
 scenario, ``samples_per_insert 0`` so no rate limiter throttles, no periodic checkpoint).
 Synthetic actors (``--actors``, named ``a0``, ``a1``, ...) are spread over ``--publishers``
-processes; each actor publishes pre-encoded TRANSITIONS (``bench.replay.synthetic_message``) to
+processes; each actor publishes pre-encoded TRANSITIONS (``replay_harness.synthetic_message``) to
 its shard (``wire.shard_of``), as fast as BLOCK lets it. Measured for each shard count:
 
 - ingest: transitions/s **stored** over a window, summed over every shard (each shard's
@@ -46,7 +46,9 @@ from laneshift import transport, wire
 from laneshift.config import TransportConfig
 from laneshift.progress import write as progress_write
 
-from .replay import MESSAGES_PER_ACTOR, SAMPLE_BATCH, BenchError, _CpuMeter, synthetic_message, time_calls, wait_for_router
+from .cpu_meter import CpuMeter
+from .replay_harness import (MESSAGES_PER_ACTOR, SAMPLE_BATCH, BenchError, synthetic_message, time_calls,
+                             wait_for_router)
 
 
 def register(subparsers: Any) -> None:
@@ -326,7 +328,7 @@ class _ShardBench:
                         raise BenchError(f"{run_id}: the tables did not fill in 300 s")
                     time.sleep(0.1)
                 # Window 1: ingest alone (the rate and its CPU); window 2: sample latency under it.
-                meter = _CpuMeter({"servers": [self.group.procs[n].pid for n in servers],
+                meter = CpuMeter({"servers": [self.group.procs[n].pid for n in servers],
                                    "router": [self.group.procs["router"].pid],
                                    "publishers": [p["proc"].pid for p in pubs]})
                 s0 = stats()

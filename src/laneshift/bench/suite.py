@@ -20,7 +20,7 @@ prefix names its target, docs/performance.md lists where each stands):
 Nothing is estimated: a figure whose benchmark did not run is ``null`` with the reason. One thing
 is measured twice on purpose: the bare loop runs again right after the whole run
 (``bare_after_run``), and the p1 bound is the mean of the two, because this machine's speed drifts
-between minutes (``bench p1`` does the same for each of its runs).
+between minutes (``bench run-vs-bound`` does the same for each of its runs).
 May import: the contract and ``deploy``.
 
     laneshift bench all --out docs/results/bench-all.json      # about 10 minutes here
@@ -93,8 +93,8 @@ BATCH = 256
 #: A p1 figure (a run against its learner's bound) says something only when the bare loop measured
 #: before and after its run agree within this: the target's own margin is 10 % (0.9 of the bound),
 #: and on the 2-core VM these benchmarks were written on the bare loop once measured 138.5 updates/s
-#: just before a run and 220.6 right after it (`laneshift bench p1` shows both; docs/performance.md).
-#: A round beyond it is reported, flagged, and left out of ``bench p1``'s resolved summary.
+#: just before a run and 220.6 right after it (`laneshift bench run-vs-bound` shows both; docs/performance.md).
+#: A round beyond it is reported, flagged, and left out of ``bench run-vs-bound``'s resolved summary.
 MAX_BARE_DRIFT = 0.10
 
 
@@ -161,7 +161,7 @@ def derive(r: dict) -> dict:
     bound = learner_bound(bare, after, ratio=ReplayConfig().samples_per_insert) if bare else None
     drift = bare_drift(bare, after)
     ours = run.get("training_env_steps_per_s")  # the whole of training, as RLlib's figure is read
-    steady = run.get("steady_env_steps_per_s")  # its last two thirds: p1's (bench p1 repeats it in rounds)
+    steady = run.get("steady_env_steps_per_s")  # its last two thirds: p1's (bench run-vs-bound repeats it in rounds)
     theirs = peer.get("env_steps_per_s") if isinstance(peer, dict) else None
     return {
         "p5_learner_over_bare": round(learner["learner_over_bare"], 2) if learner.get("learner_over_bare") else None,
@@ -212,7 +212,7 @@ def bench_all(quick: bool) -> dict:
     result["ingest_1024"] = _bench("shards", ["--shards", "1", "--batch", "1024", "--duration", seconds,
                                               "--capacity", "500000" if quick else "2000000"], 900)
     result["run"] = _bench("run", ["--train-args", RUN_ARGS.format(steps=steps)], 900)
-    # The bare loop again right after the run, as `bench p1` does: the p1 bound is the mean of the two.
+    # The bare loop again right after the run, as `bench run-vs-bound` does: the p1 bound is the mean of the two.
     result["bare_after_run"] = {"updates_per_s": bare_updates_per_s(float(seconds))}
     result["peers"] = {"rllib": _rllib(steps // 2, 1800),
                        "reverb": _reverb(seconds, "100000" if quick else "400000", 900)}

@@ -1,37 +1,21 @@
-"""One flat, frozen dataclass per component, and the loader that builds them.
+"""The settings of a run: one flat, frozen dataclass per component (``env``, ``actor``, ``replay``,
+``learner``, ``transport``, ``train``, ``deploy``), each refusing a bad value with a
+``ConfigError`` that names the field, and ``RunConfig``, which groups them and checks the rules
+that span sections. Building them from files and ``--set`` strings is ``.loading``'s.
 
-Each component receives only its own config. ``RunConfig`` just groups them so a run can be
-saved and loaded as one YAML/TOML file with one section per component::
-
-    env:     {scenario: straight, observation: vector}
-    replay:  {capacity: 100000, demo_mode: rehearsal}
-    learner: {lr: 0.0005}
-
-A bad value is refused with a ``ConfigError`` naming the field, e.g.
-``replay.demo_ratio: must be in (0, 1), got 1.5``.
-
-    >>> cfg = load_run_config(overrides={"env.scenario": "lka", "actor.workers": "2"})
-    >>> cfg.actor.workers
-    2
-
-Room: the contract (shared by every process). May import: other contract modules only, never a
-component, deploy or a tool.
+Room: the contract (shared by every process). May import: the standard library only; no other
+module of the config package.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import functools
-import json
 import math
 import re
-import tomllib
 import typing
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, Literal, Mapping
-
-import yaml
 
 SCENARIO_NAMES = ("straight", "merge", "curve", "roundabout", "lka")
 
@@ -547,192 +531,3 @@ SECTIONS: dict[str, type] = {"env": EnvConfig, "actor": ActorConfig, "replay": R
 
 def _plain(d: Mapping[str, Any]) -> dict[str, Any]:
     return {k: list(v) if isinstance(v, tuple) else dict(v) if isinstance(v, dict) else v for k, v in d.items()}
-
-
-def _coerce(where: str, typ: Any, value: Any) -> Any:
-    """Turn a YAML/TOML/CLI value into ``typ``; strings from the CLI are parsed."""
-    origin = typing.get_origin(typ)
-    if origin is dict:  # resource maps: YAML/JSON mappings, or '{"GPU": 1}' / 'GPU=1,big_mem=1' from the CLI
-        if isinstance(value, str):
-            text = value.strip()
-            if text.startswith("{"):
-                try:
-                    value = json.loads(text)
-                except json.JSONDecodeError:
-                    raise ConfigError(f"{where}: not a JSON mapping, got {value!r}") from None
-            else:
-                pairs = [p.partition("=") for p in text.split(",") if p.strip()]
-                if any(not sep for _, sep, _ in pairs):
-                    raise ConfigError(f"{where}: write NAME=AMOUNT[,NAME=AMOUNT] or a JSON mapping, got {value!r}")
-                value = {k.strip(): v.strip() for k, _, v in pairs}
-        if not isinstance(value, Mapping):
-            raise ConfigError(f"{where}: must be a mapping, got {value!r}")
-        _, val_t = typing.get_args(typ)
-        return {str(k): _coerce(f"{where}.{k}", val_t, v) for k, v in value.items()}
-    if origin is tuple:
-        (item,) = {a for a in typing.get_args(typ) if a is not Ellipsis}
-        if isinstance(value, str):
-            value = [v for v in value.split(",") if v.strip()] if value.strip() else []
-        if not isinstance(value, (list, tuple)):
-            raise ConfigError(f"{where}: must be a list, got {value!r}")
-        return tuple(_coerce(where, item, v) for v in value)
-    if typ is bool:
-        if isinstance(value, bool):
-            return value
-        if isinstance(value, str) and value.lower() in ("1", "true", "yes", "on", "0", "false", "no", "off"):
-            return value.lower() in ("1", "true", "yes", "on")
-        raise ConfigError(f"{where}: must be true or false, got {value!r}")
-    if typ is int:
-        if isinstance(value, bool):
-            raise ConfigError(f"{where}: must be an integer, got {value!r}")
-        if isinstance(value, int):
-            return value
-        if isinstance(value, float) and value.is_integer():
-            return int(value)
-        if isinstance(value, str):
-            try:
-                return int(value.replace("_", ""))
-            except ValueError:
-                try:  # "2e4" is a common way to write a budget
-                    as_float = float(value)
-                    if as_float.is_integer():
-                        return int(as_float)
-                except ValueError:
-                    pass
-        raise ConfigError(f"{where}: must be an integer, got {value!r}")
-    if typ is float:
-        if isinstance(value, (int, float)) and not isinstance(value, bool):
-            return float(value)
-        if isinstance(value, str):
-            try:
-                return float(value)
-            except ValueError:
-                pass
-        raise ConfigError(f"{where}: must be a number, got {value!r}")
-    if typ is str:
-        if isinstance(value, (str, int, float)) and not isinstance(value, bool):
-            return str(value)
-        raise ConfigError(f"{where}: must be a string, got {value!r}")
-    if origin is Literal:  # a choice: the section's __post_init__ names the choices if it is none of them
-        return value if isinstance(value, str) else _coerce(where, str, value)
-    raise ConfigError(f"{where}: unsupported type {typ}")
-
-
-def build_section(name: str, values: Mapping[str, Any]) -> Any:
-    """Build one component config from a mapping, refusing unknown fields and bad types."""
-    cls = SECTIONS[name]
-    hints = typing.get_type_hints(cls)
-    known = {f.name for f in dataclasses.fields(cls)}
-    unknown = set(values) - known
-    if unknown:
-        raise ConfigError(f"{name}.{sorted(unknown)[0]}: unknown field (known: {', '.join(sorted(known))}; "
-                          f"`laneshift config fields {name}` says what each does)")
-    kwargs = {k: _coerce(f"{name}.{k}", hints[k], v) for k, v in values.items()}
-    try:
-        return cls(**kwargs)
-    except TypeError as exc:  # pragma: no cover - guarded by the unknown-field check
-        raise ConfigError(f"{name}: {exc}") from None
-
-
-def read_config_file(path: str | Path) -> dict[str, dict[str, Any]]:
-    """Read a YAML (.yaml/.yml), TOML (.toml) or JSON file with one table per component."""
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise ConfigError(f"config file {path}: {exc.strerror}") from None
-    try:
-        if path.suffix == ".toml":
-            data = tomllib.loads(text)
-        elif path.suffix == ".json":
-            data = json.loads(text)
-        else:
-            data = yaml.safe_load(text) or {}
-    except (yaml.YAMLError, tomllib.TOMLDecodeError, json.JSONDecodeError) as exc:
-        raise ConfigError(f"config file {path}: not valid {path.suffix.lstrip('.') or 'yaml'}: {exc}") from None
-    if not isinstance(data, dict):
-        raise ConfigError(f"config file {path}: top level must be a mapping of sections")
-    for section, body in data.items():
-        if section not in SECTIONS:
-            raise ConfigError(f"config file {path}: unknown section {section!r} (known: {', '.join(SECTIONS)})")
-        if not isinstance(body, dict):
-            raise ConfigError(f"config file {path}: section {section!r} must be a mapping")
-    return data
-
-
-def load_run_config(path: str | Path | None = None, overrides: Mapping[str, Any] | None = None,
-                    base: RunConfig | None = None) -> RunConfig:
-    """File values over ``base`` (defaults), then ``overrides`` ({"section.field": value}) on top."""
-    merged: dict[str, dict[str, Any]] = (base or RunConfig()).to_dict()
-    if path is not None:
-        for section, body in read_config_file(path).items():
-            merged[section].update(body)
-    for dotted, value in (overrides or {}).items():
-        section, _, name = dotted.partition(".")
-        if section not in SECTIONS or not name:
-            raise ConfigError(f"{dotted}: overrides are written section.field (sections: {', '.join(SECTIONS)})")
-        merged[section][name] = value
-    return RunConfig(**{name: build_section(name, body) for name, body in merged.items()})
-
-
-def save_run_config(cfg: RunConfig, path: str | Path) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(yaml.safe_dump(cfg.to_dict(), sort_keys=False))
-    return path
-
-
-# ---------------------------------------------------------------------------- method presets
-# The named methods of `laneshift train --method` and `laneshift experiment compare --methods`:
-# config overrides on top of the run's config (the user's --set values win over them).
-
-# DQfD (Hester et al. 2018): pre-training on demos (20,000 updates), demos kept in the buffer
-# (30 % of 300,000 items, i.e. about 300 scripted episodes), large-margin loss on demo rows,
-# 10-step returns. Phase 2 explores from epsilon 0.3: the pre-trained network already drives.
-_DQFD: dict[str, Any] = {
-    "replay.demo_mode": "dqfd", "learner.margin_loss_weight": 1.0, "learner.n_step": 10,
-    "learner.phase1_updates": 20_000, "replay.capacity": 300_000, "replay.demo_ratio": 0.3,
-    "actor.phase2_epsilon_start": 0.3}
-
-# The learner of dqfd-bc-anneal without its demo mode: 10-step returns, a dueling head, a 300,000-item
-# buffer, the step size falling to a tenth over the budget, an average of the online weights as the
-# network handed out, exploration ending at 1 %. The paper's modes on it (the `*-anneal` presets)
-# answer the paper's question on a learner that converges (`laneshift experiment paper`).
-_ANNEALED_LEARNER: dict[str, Any] = {
-    "learner.n_step": 10, "learner.dueling": True, "replay.capacity": 300_000,
-    "learner.lr_final": 5e-5, "learner.ema_decay": 0.999, "actor.epsilon_final": 0.01}
-
-METHODS: dict[str, dict[str, Any]] = {
-    "none": {"replay.demo_mode": "none"},
-    "retention": {"replay.demo_mode": "retention"},
-    "rehearsal": {"replay.demo_mode": "rehearsal"},
-    # The paper's three modes as the paper defines them (retention: 10 % of the buffer; rehearsal:
-    # exploration restarts at epsilon_start in phase 2), on the annealed learner; rehearsal
-    # pre-trains as long as dqfd does (20,000 updates).
-    "none-anneal": {**_ANNEALED_LEARNER, "replay.demo_mode": "none"},
-    "retention-anneal": {**_ANNEALED_LEARNER, "replay.demo_mode": "retention"},
-    "rehearsal-anneal": {**_ANNEALED_LEARNER, "replay.demo_mode": "rehearsal", "learner.phase1_updates": 20_000},
-    "dqfd": _DQFD,
-    # dqfd plus supervised imitation (cross-entropy on demo rows) and a dueling head: the two
-    # changes that made the pre-trained network drive like the demonstrator (docs/results-history.md, round 2).
-    "dqfd-bc": {**_DQFD, "learner.bc_loss_weight": 1.0, "learner.dueling": True},
-    # dqfd-bc whose last network settles instead of being one draw of the TD noise: the step size
-    # falls to a tenth over the budget, the network handed out is an average of the online weights
-    # (about the last 1,000 updates) and exploration ends at 1 %. Measured against dqfd-bc on the
-    # same seeds: no difference three seeds can see (docs/RESULTS.md, the straight road's ablation).
-    "dqfd-bc-anneal": {**_DQFD, **_ANNEALED_LEARNER, "learner.bc_loss_weight": 1.0},
-    # dqfd-bc-anneal for which a crash never pays: after a terminal step the target bootstraps -100,
-    # the value of driving on in a non-target lane for ever (learner.terminal_value). Measured: on
-    # the straight road 2 points higher on the test episodes and equal on the validation ones; on
-    # merge lower on both (docs/RESULTS.md).
-    "dqfd-bc-safe": {**_DQFD, "learner.bc_loss_weight": 1.0, "learner.dueling": True,
-                     "learner.lr_final": 5e-5, "learner.ema_decay": 0.999, "actor.epsilon_final": 0.01,
-                     "learner.terminal_value": -100.0},
-}
-
-
-def method_settings(method: str, option: str = "method") -> dict[str, Any]:
-    """The named method's config overrides; an unknown name is refused naming ``option``."""
-    if method not in METHODS:
-        raise ConfigError(f"{option}: unknown {method!r} (known: {', '.join(METHODS)})")
-    return METHODS[method]

@@ -1,5 +1,7 @@
-"""``laneshift bench p1``: a whole run's env steps/s against the bound its learner allows (the
-figure ``bench all`` reports as ``p1_*``; the target is at least 0.9 of the bound).
+"""``laneshift bench run-vs-bound``: a whole run's env steps/s against the bound its learner allows
+(the figure ``bench all`` reports as ``p1_*``, after target P1 of docs/performance.md: at least 0.9
+of the bound). Its old name, ``bench p1``, still runs it (hidden from the command list) and says the
+new one.
 
 At replay ratio R (``replay.samples_per_insert``) and batch B, a run can make at most
 ``bare updates/s x B / R`` env steps/s, where ``bare updates/s`` is a bare torch loop's rate with
@@ -12,9 +14,9 @@ A run's rate is read from its learner's ``metrics.jsonl`` (``bench run``): over 
 training, and over its last two thirds (the steady state, past the replay's fill to min_size and
 the first weights' trip to the workers). Both fractions are reported; the steady one is the figure.
 
-    laneshift bench p1                               # 2 rounds of 40,000 env steps at ratio 32
-    laneshift bench p1 --rounds 3 --json
-    laneshift bench p1 --train-args "--workers 2 --set actor.envs_per_worker=4"
+    laneshift bench run-vs-bound                     # 2 rounds of 40,000 env steps at ratio 32
+    laneshift bench run-vs-bound --rounds 3 --json
+    laneshift bench run-vs-bound --train-args "--workers 2 --set actor.envs_per_worker=4"
 
 Room: the tools (benchmarks). May import: anything in laneshift.
 """
@@ -24,6 +26,7 @@ from __future__ import annotations
 import argparse
 import json
 import statistics
+import sys
 from typing import Any
 
 from .run import bench_run
@@ -34,16 +37,16 @@ def _r(x: float | None) -> float | None:
     return round(x, 1) if x is not None else None
 
 
-def bench_p1(rounds: int = 2, env_steps: int = 40_000, ratio: float = 32.0, train_args: str = "--workers 2",
-             seconds: float = 3.0) -> dict:
+def bench_run_vs_bound(rounds: int = 2, env_steps: int = 40_000, ratio: float = 32.0,
+                       train_args: str = "--workers 2", seconds: float = 3.0) -> dict:
     if rounds < 1:
-        raise SystemExit("bench p1: --rounds must be at least 1")
+        raise SystemExit("bench run-vs-bound: --rounds must be at least 1")
     args = f"--scenario straight {train_args} --env-steps {env_steps} --set replay.samples_per_insert={ratio:g}"
-    bares = [bare_updates_per_s(seconds, said_by="bench p1")]
+    bares = [bare_updates_per_s(seconds, said_by="bench run-vs-bound")]
     rows: list[dict[str, Any]] = []
     for i in range(rounds):
         run = bench_run(args)
-        bares.append(bare_updates_per_s(seconds, said_by="bench p1"))
+        bares.append(bare_updates_per_s(seconds, said_by="bench run-vs-bound"))
         before, after = bares[i], bares[i + 1]
         row: dict[str, Any] = {"round": i + 1, "rc": run.get("rc"), "bare_before": _r(before), "bare_after": _r(after)}
         if before and after and run.get("rc") == 0:
@@ -100,15 +103,35 @@ def render(r: dict) -> str:
     return "\n".join(lines)
 
 
-def bench_p1_main(args: argparse.Namespace) -> int:
-    result = bench_p1(args.rounds, args.env_steps, args.ratio, args.train_args, args.seconds)
+def run_vs_bound_main(args: argparse.Namespace) -> int:
+    result = bench_run_vs_bound(args.rounds, args.env_steps, args.ratio, args.train_args, args.seconds)
     print(json.dumps(result, indent=2) if args.json else render(result))
     return 0 if all("error" not in r for r in result["rounds"]) else 1
 
 
+#: The command's name before it said what it measures (P1 is the target's label, not the measurement).
+OLD_NAME = "p1"
+
+
+def _old_name_main(args: argparse.Namespace) -> int:
+    print(f"laneshift bench {OLD_NAME} is now `laneshift bench run-vs-bound`", file=sys.stderr, flush=True)
+    return run_vs_bound_main(args)
+
+
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("p1", help="a whole run's env steps/s against its learner's bound, the bare loop measured "
-                                  "before and after every run", formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p = sub.add_parser("run-vs-bound", help="a whole run's env steps/s against its learner's bound, the bare loop "
+                                            "measured before and after every run",
+                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    _add_arguments(p)
+    p.set_defaults(func=run_vs_bound_main)
+    # The old name: no help= keeps it out of `laneshift bench --help`; ``renamed_to`` marks it as an alias.
+    old = sub.add_parser(OLD_NAME, description="the old name of `laneshift bench run-vs-bound`",
+                         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    _add_arguments(old)
+    old.set_defaults(func=_old_name_main, renamed_to="laneshift bench run-vs-bound")
+
+
+def _add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rounds", type=int, default=2, help="runs, each between two bare-loop measurements")
     p.add_argument("--env-steps", type=int, default=40_000, help="each run's budget")
     p.add_argument("--ratio", type=float, default=32.0, help="replay.samples_per_insert of the runs")
@@ -116,4 +139,3 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="more arguments for `laneshift train --local` (not --run-dir, --env-steps)")
     p.add_argument("--seconds", type=float, default=3.0, help="seconds per bare-loop measurement")
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
-    p.set_defaults(func=bench_p1_main)
