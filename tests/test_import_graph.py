@@ -323,3 +323,20 @@ def test_imports_are_found_at_module_level_and_inside_functions(tmp_path, text, 
 if __name__ == "__main__":
     print(report(graph()))
     sys.exit(0)
+
+
+def test_every_module_opens_with_what_it_is_its_room_and_what_it_may_import():
+    """Every Python file in the repository (package, components, wiring, tools, tests, benchmarks,
+    examples) opens with a docstring that names its room (floor) and what it may import."""
+    import subprocess
+
+    root = Path(__file__).resolve().parents[1]
+    files = subprocess.run(["git", "ls-files", "*.py"], cwd=root, capture_output=True, text=True,
+                           check=True).stdout.split()
+    assert len(files) > 100
+    missing = []
+    for name in files:
+        doc = ast.get_docstring(ast.parse((root / name).read_text())) or ""
+        if "Room:" not in doc or "May import" not in doc:
+            missing.append(name)
+    assert not missing, "modules whose opening docstring lacks 'Room:' or 'May import': " + ", ".join(missing)

@@ -11,7 +11,8 @@ arguments of ``make train`` unless told otherwise), watched every 0.5 s through 
   really costs; the RSS sum counts shared libraries (torch) once per process.
 
 Why /proc and not psutil: psutil is not a dependency, and two files per process say it all.
-May import: the contract and ``deploy``.
+Room: the tools (benchmarks). May import: the contract and ``deploy`` (its process-tree reader); the run
+itself is a ``laneshift train`` subprocess.
 
     laneshift bench run --json
     laneshift bench run --train-args "--workers 4 --env-steps 40000"

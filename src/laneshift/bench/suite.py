@@ -21,7 +21,9 @@ Nothing is estimated: a figure whose benchmark did not run is ``null`` with the 
 is measured twice on purpose: the bare loop runs again right after the whole run
 (``bare_after_run``), and the p1 bound is the mean of the two, because this machine's speed drifts
 between minutes (``bench run-vs-bound`` does the same for each of its runs).
-May import: the contract and ``deploy``.
+
+Room: the tools (benchmarks). May import: the contract (``laneshift.config``); every benchmark runs as a
+``laneshift bench ...`` subprocess and each peer in its own venv.
 
     laneshift bench all --out docs/results/bench-all.json      # about 10 minutes here
     laneshift bench all --quick                                  # shorter windows, about 4 minutes

@@ -5,7 +5,7 @@ epsilon-greedily with a learner-shaped network and encoding every batch it sends
 core; its links only count what it sends (nothing downstream is measured: the replay server and
 the learner have their own benchmarks). Several envs per worker share one batched forward pass
 per step, which is what the 4 and 16 rows show.
-May import: the contract, ``deploy`` and the argparse types (``laneshift.argtypes``).
+Room: the tools (benchmarks). May import: the contract, ``deploy`` and the argparse types (``laneshift.argtypes``).
 
     laneshift bench worker --envs 1,4,16 --steps 4000 --json
 """
