@@ -27,7 +27,7 @@ import gymnasium as gym
 import numpy as np
 
 from laneshift.config import EnvConfig
-from laneshift.envspec import SCENARIOS
+from laneshift.envspec import ALLROADS, SCENARIOS
 from laneshift.progress import progress as progress_bar
 
 from .envs import make as make_env
@@ -206,6 +206,8 @@ def checkpoint_env_settings(meta: Mapping[str, str]) -> dict[str, str]:
 def _shape_hint(trained: tuple[int, ...], given: tuple[int, ...]) -> str:
     if trained == (67,):
         return " (the 67-float vector layout is env.lane_features=false)"
+    if len(trained) == len(given) == 1 and trained[0] == given[0] + len(ALLROADS):
+        return " (an allroads network: --scenario allroads, with --set env.road=ROAD for one road)"
     if len(trained) != len(given):  # frames against a vector, or the other way round
         kind = "grayscale" if len(trained) == 3 else "vector"
         return (f" (a {kind} checkpoint: env.observation={kind}, which `laneshift eval` takes from the checkpoint "

@@ -20,6 +20,7 @@ def test_scenarios_and_ids() -> None:
         "merge": "laneshift/MergeLaneChange-v0",
         "curve": "laneshift/CurveLaneChange-v0",
         "roundabout": "laneshift/RoundaboutLaneChange-v0",
+        "allroads": "laneshift/AllRoadsLaneChange-v0",
         "lka": "laneshift/LaneKeepingAssist-v0",
     }
     for env_id in envs.SCENARIOS.values():

@@ -1,7 +1,9 @@
 """The evaluation protocol end to end at a tiny budget: a real training run validated on the
 validation episodes, its final network tested, the baselines on the same test episodes, the table,
 the published network with its provenance, and a second invocation that skips the finished seed;
-and the validation-curve measures (time to a threshold, the largest drop) on hand-made curves.
+the same for one network on all four roads (allroads: rows per road and initial lane, each road's
+own test episodes); and the validation-curve measures (time to a threshold, the largest drop) and
+the pooling of the four roads' evaluations on hand-made numbers.
 
 Room: tests, system (real Ray, zenoh or laneshift processes; the `system` marker). May import:
 laneshift (any floor), pytest, numpy, the standard library and what the code under test needs."""
@@ -13,6 +15,7 @@ import json
 import shlex
 import time
 
+import numpy as np
 import pytest
 import yaml
 
@@ -126,7 +129,79 @@ def test_bad_input_fails_before_any_run(tmp_path, capsys):
     from laneshift import cli
 
     for argv, needle in ((["--method", "dqfq"], "--method: unknown 'dqfq'"), (["--seeds", "0,0"], "named twice"),
-                         (["--set", "learner.lr=fast"], "learner.lr"), (["--road", "a/b"], "--road")):
+                         (["--set", "learner.lr=fast"], "learner.lr"), (["--road", "a/b"], "--road"),
+                         (["--scenario", "allroads", "--set", "env.road=merge"], "leave env.road empty")):
         assert cli.main(["experiment", "protocol", "--out", str(tmp_path / "p"), *argv]) == 2
         assert needle in capsys.readouterr().err
     assert not (tmp_path / "p").exists()
+
+
+def test_the_four_roads_evaluations_pool_into_one():
+    from laneshift.studies.allroads import merge_evals
+
+    a = {"episodes": 2, "return_mean": 1.0, "return_std": 0.0, "length_mean": 10.0, "survival_rate": 1.0,
+         "achievement_rate": 0.5, "crashes": {}}
+    b = {"episodes": 6, "return_mean": 5.0, "return_std": 2.0, "length_mean": 20.0, "survival_rate": 0.5,
+         "achievement_rate": 0.5, "crashes": {"collision": {"start lane 1": 2}, "offroad": {"start lane 2": 1}}}
+    c = {**b, "crashes": {"collision": {"start lane 1": 1, "start lane 0": 2}}}
+    m = merge_evals([a, b, c])
+    assert m["episodes"] == 14 and m["survival_rate"] == 8 / 14 and m["achievement_rate"] == 7 / 14
+    assert m["length_mean"] == pytest.approx((20 + 120 + 120) / 14) and m["return_mean"] == pytest.approx(62 / 14)
+    values = [1.0] * 2 + [3.0, 7.0] * 6  # 12 episodes of mean 5 and spread 2
+    assert m["return_std"] == pytest.approx(float(np.std(values)))
+    assert m["crashes"] == {"collision": {"start lane 1": 3, "start lane 0": 2}, "offroad": {"start lane 2": 1}}
+    assert m["survival_ci95"][0] < 8 / 14 < m["survival_ci95"][1]
+
+
+def test_protocol_on_allroads_tests_each_road_on_its_own_episodes(tmp_path, capsys):
+    from laneshift import cli
+    from laneshift.actors.envs.demonstrator import ScriptedDriver
+    from laneshift.config import EnvConfig
+    from laneshift.studies.evaluate import evaluate_lanes
+
+    out, pub = tmp_path / "proto", tmp_path / "published"
+    argv = ["experiment", "protocol", "--scenario", "allroads", "--method", "dqfd", "--seeds", "0",
+            "--env-steps", "400", "--test-episodes", "2", "--eval-max-steps", "30", "--validation-every", "0",
+            "--out", str(out), "--publish", str(pub), *TINY, "--set", "env.max_steps=50"]
+    assert cli.main(argv) == 0
+    results = json.loads((out / "results.json").read_text())
+    roads = ("straight", "merge", "curve", "roundabout")
+    assert results["road"] == "allroads" and list(results["roads"]) == list(roads)
+    assert results["test"] == {"episode_seed": 100_000, "episodes_per_lane": 2, "max_steps": 30, "roads": list(roads)}
+    (run,) = results["methods"]["dqfd"]["runs"]
+    for lane in ("random", "non-target"):
+        assert run["eval"][lane]["episodes"] == 8  # the four roads pooled
+        assert results["baselines"]["scripted"][lane]["survival"]["episodes"] == 8
+        for road in roads:
+            assert run["eval_by_road"][road][lane]["episodes"] == 2
+            assert results["roads"][road]["methods"]["dqfd"][lane]["survival"]["per_seed"] == \
+                [run["eval_by_road"][road][lane]["survival_rate"]]
+            assert set(results["roads"][road]["target_met"][lane]) == {"survival", "achievement"}
+    # A road's rows are that road's own test episodes: the scripted driver on the single-road scenario agrees.
+    merge = evaluate_lanes(ScriptedDriver, EnvConfig(scenario="merge", max_steps=30), 2, 100_000)
+    for lane in ("random", "non-target"):
+        for metric in ("survival", "achievement"):
+            assert results["roads"]["merge"]["baselines"]["scripted"][lane][metric]["rate"] == \
+                merge[lane][f"{metric}_rate"]
+    assert all((out / f"baselines-{road}.json").is_file() for road in roads)
+    table = (out / "table.md").read_text()
+    for road in (*roads, "all four"):
+        for lane in ("random", "non-target"):
+            assert f"| {road} | {lane} |" in table
+    assert "target 95% / 90% met" in table and "Validation during training: off" in table
+    # Published as allroads-<method>-seed<N>, with each road's `laneshift eval` commands.
+    assert (pub / "allroads-dqfd-seed0-final.safetensors").is_file()
+    doc = json.loads((pub / "allroads-dqfd-seed0-final.json").read_text())
+    assert doc["test"]["lanes"]["random"]["episodes"] == 8 and list(doc["test"]["roads"]) == list(roads)
+    entry = doc["test"]["roads"]["curve"]["non-target"]
+    cmd = shlex.split(entry["command"])
+    assert cmd[cmd.index("--scenario") + 1] == "allroads" and "env.road=curve" in cmd
+    capsys.readouterr()
+    assert cli.main(cmd[1:] + ["--json"]) == 0
+    again = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert (again["survival_rate"], again["achievement_rate"]) == (entry["survival_rate"], entry["achievement_rate"])
+    # The same command again: the seed is done, each road's baselines are kept.
+    assert cli.main(argv) == 0
+    printed = capsys.readouterr().out
+    assert "protocol: dqfd seed 0: done" in printed and printed.count("baselines: kept from") == 4
+    assert json.loads((out / "results.json").read_text())["roads"] == results["roads"]

@@ -1,4 +1,5 @@
-"""laneshift environments: the paper's four lane-change scenarios and the MATLAB LKA plant.
+"""laneshift environments: the paper's four lane-change scenarios, all four in one (``allroads``) and
+the MATLAB LKA plant.
 
 Importing this package registers the gymnasium ids below, so that
 ``gym.make("laneshift.actors.envs:laneshift/StraightLaneChange-v0")`` (or, once
@@ -41,6 +42,7 @@ _ENTRY_POINTS: dict[str, str] = {
     "laneshift/MergeLaneChange-v0": "laneshift.actors.envs.lane_change:MergeLaneChangeEnv",
     "laneshift/CurveLaneChange-v0": "laneshift.actors.envs.lane_change:CurveLaneChangeEnv",
     "laneshift/RoundaboutLaneChange-v0": "laneshift.actors.envs.lane_change:RoundaboutLaneChangeEnv",
+    "laneshift/AllRoadsLaneChange-v0": "laneshift.actors.envs.allroads:AllRoadsLaneChangeEnv",
     "laneshift/LaneKeepingAssist-v0": "laneshift.actors.envs.lka:LaneKeepingAssistEnv",
 }
 
@@ -57,7 +59,7 @@ _register()
 
 
 def make_env(scenario_or_id: str, **kwargs: Any) -> gym.Env:
-    """Create an env from a scenario name ("straight", "merge", "curve", "roundabout", "lka") or
+    """Create an env from a scenario name ("straight", "merge", "curve", "roundabout", "allroads", "lka") or
     a gymnasium id; keyword arguments go to the env constructor."""
     env_id = SCENARIOS.get(scenario_or_id, scenario_or_id)
     if env_id not in _ENTRY_POINTS and env_id not in gym.registry:

@@ -8,7 +8,8 @@
   (10 e1^2 + 5 e2^2 + 2 u^2 + 5 de1^2 + 5 de2^2) plus steady-state feed-forward for the road
   curvature, rounded to the nearest of the 31 steering actions.
 
-Both are called as ``action = driver(obs)`` and read ``env.unwrapped`` for the real state.
+Both are called as ``action = driver(obs)`` and read ``env.unwrapped`` for the real state; on
+``allroads`` the lane-change drivers read the current episode's road env (``road_env``).
 
 Room: actors, the env-running component. May import: the contract and laneshift.actors; never
 another component.
@@ -23,9 +24,15 @@ import gymnasium as gym
 import numpy as np
 
 from .actions import SPEED_CHANGES
+from .allroads import AllRoadsLaneChangeEnv
 from .control import curvature_index, lane_errors, speed_index
 from .lane_change import LaneChangeEnv
 from .lka import LKA_STEERING_DEG, LaneKeepingAssistEnv, discrete_model
+
+
+def _road_env(source: gym.Env) -> LaneChangeEnv:
+    """The lane-change env a driver reads: ``source`` itself, or allroads' road of this episode."""
+    return source.road_env if isinstance(source, AllRoadsLaneChangeEnv) else source
 
 
 def _towards(lane: int, target: int) -> int:
@@ -49,17 +56,22 @@ class ScriptedDriver:
     def __init__(self, env: gym.Env, decel: float = 0.9, buffer: float = 3.0, change_time: float = 3.5,
                  runway_margin: float = 2.0) -> None:
         base = env.unwrapped
-        if not isinstance(base, LaneChangeEnv):
+        if not isinstance(_road_env(base), LaneChangeEnv):
             raise ValueError(f"env must be a laneshift lane-change env, got {type(base).__name__}")
-        if base.action_set != "paper":
+        if _road_env(base).action_set != "paper":
             raise ValueError("ScriptedDriver drives the paper action set (action_set='paper')")
-        self.env = base
+        self.source = base
         self.decel = decel
         self.buffer = buffer
         self.change_time = change_time
         self.runway_margin = runway_margin
         self.plan_lane: int | None = None
         self._episode_key: Any = None
+
+    @property
+    def env(self) -> LaneChangeEnv:
+        """The env whose state it reads: the one it was given, or allroads' road of this episode."""
+        return _road_env(self.source)
 
     # ------------------------------------------------------------------------------------------
     def __call__(self, obs: Any = None) -> int:
@@ -217,10 +229,10 @@ class KeepLaneDriver:
     """Baseline: constant speed, steering only to stay on the current lane's centre."""
 
     def __init__(self, env: gym.Env) -> None:
-        self.env = env.unwrapped
+        self.source = env.unwrapped
 
     def __call__(self, obs: Any = None) -> int:
-        env = self.env
+        env = _road_env(self.source)
         ego = env.ego
         offset, rel, curv = lane_errors(ego.loc, ego.loc.lane, ego.heading)
         step_len = max(ego.speed, 1.0) / env.policy_frequency

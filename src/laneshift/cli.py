@@ -144,7 +144,7 @@ def _add_train(sub: argparse._SubParsersAction) -> None:
                        help="a running Ray cluster: auto (RAY_ADDRESS or this node's cluster), HOST:PORT, "
                             "or ray://HOST:10001")
     p.add_argument("--workers", type=positive_int, help="env workers (Ray actors)")
-    p.add_argument("--scenario", help="straight | merge | curve | roundabout | lka")
+    p.add_argument("--scenario", help="straight | merge | curve | roundabout | allroads | lka")
     p.add_argument("--mode", choices=["none", "retention", "rehearsal", "dqfd"],
                    help="how demos are used (the paper's three, or dqfd: pre-training then retention)")
     p.add_argument("--method", metavar="NAME",
@@ -329,8 +329,8 @@ def _add_inspection(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("eval", help="greedy evaluation of a checkpoint (survival / achievement rates)")
     p.add_argument("--checkpoint", required=True, help="a learner checkpoint (.safetensors), e.g. "
                                                        "RUN_DIR/checkpoints/final.safetensors")
-    p.add_argument("--scenario", help="straight | merge | curve | roundabout | lka (default: the checkpoint's env, "
-                                      "else the config's)")
+    p.add_argument("--scenario", help="straight | merge | curve | roundabout | allroads | lka (default: the "
+                                      "checkpoint's env, else the config's); allroads on one road: --set env.road=ROAD")
     p.add_argument("--episodes", type=positive_int, default=100, help="greedy evaluation episodes")
     p.add_argument("--initial-lane", choices=["random", "non-target"],
                    help="where episodes start: any lane, or never the target lane (default: the config's)")

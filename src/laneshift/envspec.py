@@ -29,8 +29,13 @@ SCENARIOS: dict[str, str] = {
     "merge": "laneshift/MergeLaneChange-v0",
     "curve": "laneshift/CurveLaneChange-v0",
     "roundabout": "laneshift/RoundaboutLaneChange-v0",
+    "allroads": "laneshift/AllRoadsLaneChange-v0",
     "lka": "laneshift/LaneKeepingAssist-v0",
 }
+
+#: The roads of scenario ``allroads`` (one network for all four), in the order of the one-hot its
+#: vector observation ends with; an episode reset with seed s drives ``ALLROADS[s % 4]``.
+ALLROADS: tuple[str, ...] = ("straight", "merge", "curve", "roundabout")
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ import typing
 from dataclasses import dataclass, field
 from typing import Any, Literal, Mapping
 
-SCENARIO_NAMES = ("straight", "merge", "curve", "roundabout", "lka")
+SCENARIO_NAMES = ("straight", "merge", "curve", "roundabout", "allroads", "lka")
 
 
 class ConfigError(ValueError):
@@ -57,15 +57,19 @@ def _check_choices(obj: Any, section: str) -> None:
 class EnvConfig:
     """Which environment every actor runs (the env's own kwargs, flat)."""
 
-    scenario: str = "straight"  # straight | merge | curve | roundabout | lka, or a full gymnasium id
+    # straight | merge | curve | roundabout | allroads (the four roads, one network) | lka, or a full gymnasium id
+    scenario: str = "straight"
     observation: Literal["vector", "grayscale"] = "vector"  # vector (fast, CPU default) | grayscale (paper: 4 x 100 x 100)
     reward_preset: int = 5  # Table 1 condition (lane-change scenarios only)
-    max_steps: int = 0  # 0 = the scenario's default episode length
+    max_steps: int = 0  # 0 = the scenario's default episode length (allroads: 300 on every road)
     initial_lane: Literal["random", "non-target"] = "random"  # random | non-target
     action_set: Literal["paper", "meta"] = "paper"  # paper (9 actions) | meta (highway-env meta-actions)
     policy_vehicles: int = 0  # other vehicles driven by a copy of the agent's policy
     # Per-lane gap features in the vector observation (False: the earlier 11 + 7 K layout).
     lane_features: bool = True
+    # allroads only: "" = each episode's road is drawn from its reset seed (seed % 4: straight, merge,
+    # curve, roundabout); a road's name = every episode on that road (to test one road)
+    road: str = ""
 
     def __post_init__(self) -> None:
         _check_choices(self, "env")
@@ -74,6 +78,17 @@ class EnvConfig:
         _check(1 <= self.reward_preset <= 5, "env.reward_preset", "must be 1..5 (Table 1)", self.reward_preset)
         _check(self.max_steps >= 0, "env.max_steps", "must be >= 0", self.max_steps)
         _check(self.policy_vehicles >= 0, "env.policy_vehicles", "must be >= 0", self.policy_vehicles)
+        _check(self.road in ("", "straight", "merge", "curve", "roundabout"), "env.road",
+               "must be empty (each episode draws its road) or straight, merge, curve or roundabout", self.road)
+        _check(not self.road or self.is_allroads, "env.road", "pins the road of env.scenario=allroads only "
+               f"(env.scenario is {self.scenario!r})", self.road)
+        _check(not (self.is_allroads and self.observation == "grayscale"), "env.observation",
+               "allroads needs the vector observation (the road's one-hot is appended to it; a frame has "
+               "no place for it)", self.observation)
+
+    @property
+    def is_allroads(self) -> bool:
+        return self.scenario in ("allroads", "laneshift/AllRoadsLaneChange-v0")
 
     @property
     def is_lka(self) -> bool:
@@ -91,6 +106,8 @@ class EnvConfig:
             kw["policy_vehicles"] = self.policy_vehicles
         if not self.lane_features:
             kw["lane_features"] = False
+        if self.road:
+            kw["road"] = self.road
         return kw
 
 

@@ -63,7 +63,7 @@ def env_kwargs_from_args(args: argparse.Namespace) -> dict[str, Any]:
 
 def _add_env_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scenario", required=True,
-                        help="scenario name (straight, merge, curve, roundabout, lka) or gymnasium id")
+                        help="scenario name (straight, merge, curve, roundabout, allroads, lka) or gymnasium id")
     parser.add_argument("--observation", choices=("vector", "grayscale"),
                         help="observation type (default: the env's)")
     parser.add_argument("--max-steps", type=positive_int, help="episode length limit (env kwarg max_steps)")

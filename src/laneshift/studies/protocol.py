@@ -25,6 +25,11 @@ reached 80 % and 95 %, and its largest drop below its running best after reachin
 as ``DIR/<road>-<method>-seed<N>-final.safetensors`` with a ``.json`` beside it (command line, git
 revision, resolved config, test table and the ``laneshift eval`` commands that reproduce it).
 
+``--scenario allroads`` trains one network for the four roads and tests it on each road's own test
+episodes (the single-road protocol's, the road pinned with ``env.road``), the drivers on the same
+episodes, one table row per road and initial lane (``laneshift.studies.allroads``); its published
+JSON holds the per-road ``laneshift eval`` commands.
+
 Room: the tools (studies). May import: anything in laneshift.
 """
 
@@ -47,6 +52,7 @@ import yaml
 from laneshift.argtypes import add_set_arg, fraction, non_negative_int, parse_set, positive_int
 from laneshift.config import METHODS, ConfigError, EnvConfig, RunConfig, load_run_config, method_settings
 from laneshift.progress import progress, write
+from laneshift.studies import allroads
 from laneshift.studies.evaluate import INITIAL_LANES, evaluate_lanes, load_greedy_policy
 from laneshift.studies.experiments import (HUMAN_LIKE_ROW, across_seeds, human_like_lanes, lane_stats, method_config,
                                            metrics_records, plot_eval_curves, pooled, seed_list, train_logged)
@@ -59,6 +65,8 @@ VALIDATION_SEED = 200_000
 #: Validation achievement levels whose first crossing the table reports, per seed.
 THRESHOLDS = (0.80, 0.95)
 SCENARIOS = ("straight", "merge", "curve", "roundabout")
+#: ``--scenario``'s choices: a road, or one network for all four.
+SCENARIO_CHOICES = (*SCENARIOS, "allroads")
 #: The scripted driver's row name (``laneshift.actors.envs.demonstrator.ScriptedDriver``).
 SCRIPTED_ROW = "scripted"
 BASELINES_FILE = "baselines.json"
@@ -169,6 +177,12 @@ def road_name(env: EnvConfig, scenario: str) -> str:
     return scenario + ("-policytraffic" if env.policy_vehicles > 0 else "")
 
 
+def held_out(args: argparse.Namespace, env: EnvConfig) -> dict:
+    """A seed record's ``test``: the test episodes (allroads: on each of these roads)."""
+    test = {"episode_seed": TEST_SEED, "episodes_per_lane": args.test_episodes, "max_steps": args.eval_max_steps}
+    return {**test, "roads": list(allroads.ALLROADS)} if env.is_allroads else test
+
+
 def seed_state(run_dir: Path, record: Path) -> str:
     """``done`` (its json exists), ``trained`` (the run finished, not evaluated yet), ``resume``
     (a run stopped unfinished) or ``new``."""
@@ -207,10 +221,14 @@ def plan(args: argparse.Namespace) -> tuple[Path, str, dict[int, RunConfig], dic
         cfg = method_config(seed_base, args.method, seed, run_dir, args.env_steps, user)
         return load_run_config(overrides=protocol, base=cfg)
 
-    road = args.road or road_name(config(base, seeds[0], Path("probe")).env, args.scenario)
+    probe = config(base, seeds[0], Path("probe")).env
+    if probe.is_allroads and probe.road:
+        raise ConfigError(f"env.road: the allroads protocol trains on all four roads and tests each one; leave "
+                          f"env.road empty (got {probe.road!r})")
+    road = args.road or road_name(probe, args.scenario)
     out_dir = Path(args.out or f"runs/protocol/{road}-{args.method}").resolve()
     configs, states = {}, {}
-    test = {"episode_seed": TEST_SEED, "episodes_per_lane": args.test_episodes, "max_steps": args.eval_max_steps}
+    test = held_out(args, probe)
     for seed in seeds:
         run_dir, record = out_dir / f"{args.method}-s{seed}", out_dir / f"{args.method}-s{seed}.json"
         states[seed] = seed_state(run_dir, record)
@@ -250,8 +268,15 @@ def run_seed(cfg: RunConfig, state: str, args: argparse.Namespace, out_dir: Path
         except RuntimeError as exc:  # failed, or stopped (Ctrl-C, SIGTERM) with its checkpoints
             raise SystemExit(f"seed {seed}: {exc}; the same command again continues it") from None
     greedy = load_greedy_policy(run_dir / "checkpoints" / "final.safetensors")
-    evals = evaluate_lanes(lambda env: greedy, dataclasses.replace(cfg.env, max_steps=args.eval_max_steps),
-                           args.test_episodes, TEST_SEED, progress=f"test {method} seed {seed}")
+    test_env = dataclasses.replace(cfg.env, max_steps=args.eval_max_steps)
+    by_road = None
+    if test_env.is_allroads:  # each road's own test episodes; the protocol's numbers pool the four
+        by_road = allroads.evaluate_roads(lambda env: greedy, test_env, args.test_episodes, TEST_SEED,
+                                          progress=f"test {method} seed {seed}")
+        evals = allroads.pooled_roads(by_road)
+    else:
+        evals = evaluate_lanes(lambda env: greedy, test_env, args.test_episodes, TEST_SEED,
+                               progress=f"test {method} seed {seed}")
     try:
         summary = json.loads((run_dir / "summary.json").read_text())
     except (OSError, ValueError):
@@ -261,26 +286,31 @@ def run_seed(cfg: RunConfig, state: str, args: argparse.Namespace, out_dir: Path
     record = {"seed": seed, "method": method, "road": road, "run_dir": str(run_dir),
               "resumed": state == "resume", "wall_s": round(time.monotonic() - started, 1),
               "train_wall_s": summary.get("wall_s"), "env_steps": summary.get("env_steps") or cfg.train.env_steps,
-              "test": {"episode_seed": TEST_SEED, "episodes_per_lane": args.test_episodes,
-                       "max_steps": args.eval_max_steps},
-              "eval": evals,
+              "test": held_out(args, cfg.env),
+              "eval": evals, **({"eval_by_road": by_road} if by_road is not None else {}),
               "validation": {"episode_seed": t.get("validation_seed"), "every": t["eval_every"],
                              "episodes": t["periodic_eval_episodes"], "curve": validation_curve(run_dir)},
               "command": command_line(), "git": git_revision(), "config": config}
     write_json(out_dir / f"{method}-s{seed}.json", record)
-    write(f"protocol: {method} seed {seed}: " + ", ".join(
-        f"{lane} survival {e['survival_rate']:.1%} achievement {e['achievement_rate']:.1%}"
-        for lane, e in evals.items()))
+    for where, lanes in ({"": evals} if by_road is None else {f"{r}, ": e for r, e in by_road.items()}).items():
+        write(f"protocol: {method} seed {seed}: {where}" + ", ".join(
+            f"{lane} survival {e['survival_rate']:.1%} achievement {e['achievement_rate']:.1%}"
+            for lane, e in lanes.items()))
     return record
 
 
-def drive_baselines(env_cfg: EnvConfig, episodes: int, out_dir: Path) -> dict[str, dict]:
+def drive_baselines(env_cfg: EnvConfig, episodes: int, out_dir: Path,
+                    filename: str = BASELINES_FILE) -> dict[str, dict]:
     """The scripted driver and the human-like stand-in on the test episodes (per initial lane), kept
-    in ``baselines.json`` and read back from there while they are of the same episodes."""
+    in ``filename`` (default ``baselines.json``) and read back from there while they are of the same
+    episodes."""
     from laneshift.actors.envs.demonstrator import ScriptedDriver
 
-    key = json.loads(json.dumps({"env": dataclasses.asdict(env_cfg), "episodes": episodes, "episode_seed": TEST_SEED}))
-    path = out_dir / BASELINES_FILE
+    env = dataclasses.asdict(env_cfg)
+    if not env["road"]:  # the key of the files written before env.road existed, which stay valid
+        del env["road"]
+    key = json.loads(json.dumps({"env": env, "episodes": episodes, "episode_seed": TEST_SEED}))
+    path = out_dir / filename
     if path.is_file():
         try:
             kept = json.loads(path.read_text())
@@ -290,15 +320,28 @@ def drive_baselines(env_cfg: EnvConfig, episodes: int, out_dir: Path) -> dict[st
             write(f"protocol: baselines: kept from {path}")
             return kept["drivers"]
         write(f"protocol: baselines: {path} is of other test episodes; driving them again")
-    drivers = {SCRIPTED_ROW: evaluate_lanes(ScriptedDriver, env_cfg, episodes, TEST_SEED, progress="baseline scripted"),
+    label = "baseline scripted" + (f", {env_cfg.road}" if env_cfg.road else "")
+    drivers = {SCRIPTED_ROW: evaluate_lanes(ScriptedDriver, env_cfg, episodes, TEST_SEED, progress=label),
                HUMAN_LIKE_ROW: human_like_lanes(env_cfg, episodes, TEST_SEED)}
     write_json(path, {"key": key, "drivers": drivers})
     return drivers
 
 
-def summarise(args: argparse.Namespace, road: str, runs: list[dict], drivers: dict[str, dict]) -> dict:
+def road_baselines(env_cfg: EnvConfig, episodes: int, out_dir: Path) -> tuple[dict[str, dict], dict[str, dict]]:
+    """allroads: the drivers on each road's test episodes (``baselines-<road>.json`` each), and
+    pooled over the four roads as :func:`drive_baselines` returns them."""
+    by_road = {road: drive_baselines(allroads.on_road(env_cfg, road), episodes, out_dir, f"baselines-{road}.json")
+               for road in allroads.ALLROADS}
+    pooled_drivers = {name: allroads.pooled_roads({road: by_road[road][name] for road in allroads.ALLROADS})
+                      for name in (SCRIPTED_ROW, HUMAN_LIKE_ROW)}
+    return pooled_drivers, by_road
+
+
+def summarise(args: argparse.Namespace, road: str, runs: list[dict], drivers: dict[str, dict],
+              drivers_by_road: dict[str, dict] | None = None) -> dict:
     """results.json: the protocol's numbers, in ``experiment compare``'s layout (``methods``,
-    ``baselines``) plus the per-seed validation measures and the comparison with the scripted driver."""
+    ``baselines``) plus the per-seed validation measures and the comparison with the scripted driver;
+    allroads (``drivers_by_road``): the four roads pooled there, and per road in ``roads``."""
     method = args.method
     body = {"runs": runs, **lane_stats(runs)}
     per_seed = {}
@@ -312,11 +355,15 @@ def summarise(args: argparse.Namespace, road: str, runs: list[dict], drivers: di
     above = {lane: {m: body[lane][m]["rate"] >= scripted[lane][f"{m}_rate"] for m in ("survival", "achievement")}
              for lane in INITIAL_LANES}
     validation = runs[0]["validation"] if runs else {}
+    test = {"episode_seed": TEST_SEED, "episodes_per_lane": args.test_episodes, "max_steps": args.eval_max_steps}
+    extra = {}
+    if drivers_by_road is not None:
+        test["roads"] = list(allroads.ALLROADS)
+        extra["roads"] = allroads.road_results(runs, drivers_by_road, method, SCRIPTED_ROW)
     return {"kind": "protocol", "road": road, "scenario": args.scenario, "method": method,
             "env_steps": args.env_steps, "seeds": [r["seed"] for r in runs],
             "eval_episodes": args.test_episodes, "eval_max_steps": args.eval_max_steps,
-            "test": {"episode_seed": TEST_SEED, "episodes_per_lane": args.test_episodes,
-                     "max_steps": args.eval_max_steps},
+            "test": test, **extra,
             "validation": {k: validation.get(k) for k in ("episode_seed", "every", "episodes")},
             "stability_target": args.stability_target, "thresholds": list(THRESHOLDS),
             "methods": {method: body},
@@ -328,8 +375,17 @@ def summarise(args: argparse.Namespace, road: str, runs: list[dict], drivers: di
 
 
 def render_table(results: dict) -> str:
-    """table.md: the test rates per initial lane beside the baselines', then per seed the time to
-    the validation thresholds and the stability figure."""
+    """table.md: the test rates per initial lane beside the baselines' (allroads: per road and initial
+    lane), then per seed the time to the validation thresholds and the stability figure."""
+    if "roads" in results:
+        lines = allroads.render_road_table(results, (SCRIPTED_ROW, HUMAN_LIKE_ROW))
+    else:
+        lines = rates_table(results)
+    return "\n".join(lines + validation_table(results)) + "\n"
+
+
+def rates_table(results: dict) -> list[str]:
+    """table.md's first part: the test rates per initial lane beside the baselines'."""
     pct = "{:.1%}".format
     method, test = results["method"], results["test"]
     runs = results["methods"][method]["runs"]
@@ -359,17 +415,24 @@ def render_table(results: dict) -> str:
         verdict = ", ".join(f"{m} {'yes' if above[m] else 'no'}" for m in ("survival", "achievement"))
         lines.append(f"| {lane} | {cells[0]} | {cells[1]} | {per[0]} | {per[1]} | {drivers[0]} | {drivers[1]} "
                      f"| {verdict} |")
+    return lines
+
+
+def validation_table(results: dict) -> list[str]:
+    """table.md's second part: per seed the time to the validation thresholds and the stability figure."""
+    pct = "{:.1%}".format
+    runs = results["methods"][results["method"]]["runs"]
     val, target = results["validation"], results["stability_target"]
     if not val.get("every"):
-        return "\n".join(lines + ["", "Validation during training: off (--validation-every 0)."]) + "\n"
-    lines += ["", f"Validation during training: greedy, every {val['every']:,} env steps, {val['episodes']} "
-                  f"episodes (episode seeds from {val['episode_seed']:,}), on the training's initial-lane setting. "
-                  f"First evaluation at or above each achievement level (env steps, wall-clock seconds since the "
-                  f"run's first metrics record); largest drop of the validation achievement below its running "
-                  f"best after it first reached {pct(target)}, in percentage points.", "",
-              "| seed | " + " | ".join(f"{t:.0%} validation achievement" for t in results["thresholds"])
-              + f" | largest drop after {pct(target)} | evaluations |",
-              "|---|" + "---|" * (len(results["thresholds"]) + 2)]
+        return ["", "Validation during training: off (--validation-every 0)."]
+    lines = ["", f"Validation during training: greedy, every {val['every']:,} env steps, {val['episodes']} "
+                 f"episodes (episode seeds from {val['episode_seed']:,}), on the training's initial-lane setting. "
+                 f"First evaluation at or above each achievement level (env steps, wall-clock seconds since the "
+                 f"run's first metrics record); largest drop of the validation achievement below its running "
+                 f"best after it first reached {pct(target)}, in percentage points.", "",
+             "| seed | " + " | ".join(f"{t:.0%} validation achievement" for t in results["thresholds"])
+             + f" | largest drop after {pct(target)} | evaluations |",
+             "|---|" + "---|" * (len(results["thresholds"]) + 2)]
     for run in runs:
         s = results["per_seed"][str(run["seed"])]
         cells = []
@@ -380,7 +443,7 @@ def render_table(results: dict) -> str:
         drop = "not reached" if s["largest_drop"] is None else f"{100 * s['largest_drop']:.1f} points"
         note = " (resumed: its seconds include the pause)" if s.get("resumed") else ""
         lines.append(f"| {run['seed']}{note} | " + " | ".join(cells) + f" | {drop} | {s['validation_evaluations']} |")
-    return "\n".join(lines) + "\n"
+    return lines
 
 
 def plot_validation(results: dict, out_dir: Path) -> Path | None:
@@ -395,9 +458,21 @@ def plot_validation(results: dict, out_dir: Path) -> Path | None:
                             what=f"validation, episode seeds {results['validation']['episode_seed']:,}+")
 
 
+def published_rates(checkpoint: Path, env: dict, test: dict, evals: dict[str, dict]) -> dict[str, dict]:
+    """A published JSON's test rates per initial lane, each with the ``laneshift eval`` command that
+    reproduces it."""
+    return {lane: {"survival_rate": e["survival_rate"], "achievement_rate": e["achievement_rate"],
+                   "episodes": e["episodes"], "survival_ci95": e.get("survival_ci95"),
+                   "achievement_ci95": e.get("achievement_ci95"),
+                   "command": eval_command(checkpoint, env, test["episodes_per_lane"], test["max_steps"], lane)}
+            for lane, e in evals.items()}
+
+
 def publish(results: dict, dest: Path, road: str) -> list[Path]:
     """Each seed's final network as ``dest/<road>-<method>-seed<N>-final.safetensors`` with its
-    provenance and test table beside it (``.json``)."""
+    provenance and test table beside it (``.json``); allroads: the four roads pooled in ``lanes``
+    (no one command gives them) and per road in ``roads``, with each road's ``laneshift eval``
+    commands."""
     dest.mkdir(parents=True, exist_ok=True)
     method, written = results["method"], []
     for run in results["methods"][method]["runs"]:
@@ -410,18 +485,22 @@ def publish(results: dict, dest: Path, road: str) -> list[Path]:
         checkpoint = dest / f"{stem}.safetensors"
         shutil.copyfile(final, checkpoint)
         test = run["test"]
-        lanes = {lane: {"survival_rate": e["survival_rate"], "achievement_rate": e["achievement_rate"],
-                        "episodes": e["episodes"], "survival_ci95": e.get("survival_ci95"),
-                        "achievement_ci95": e.get("achievement_ci95"),
-                        "command": eval_command(checkpoint, run["config"]["env"], test["episodes_per_lane"],
-                                                test["max_steps"], lane)}
-                 for lane, e in run["eval"].items()}
+        env = run["config"]["env"]
+        by_road = run.get("eval_by_road")
+        if by_road is None:
+            lanes = published_rates(checkpoint, env, test, run["eval"])
+            roads = {}
+        else:
+            roads = {"roads": {r: published_rates(checkpoint, {**env, "road": r}, test, e) for r, e in by_road.items()}}
+            lanes = {lane: {k: e.get(k) for k in ("survival_rate", "achievement_rate", "episodes", "survival_ci95",
+                                                  "achievement_ci95")} | {"pooled_over": list(by_road)}
+                     for lane, e in run["eval"].items()}
         doc = {"checkpoint": checkpoint.name, "road": road, "method": method, "seed": seed,
                "command": command_line(), "cwd": os.getcwd(), "git": git_revision(),
                "trained_by": {"command": run.get("command"), "git": run.get("git")},
                "env_steps": run["env_steps"], "run_dir": run["run_dir"],
                "test": {"episode_seed": test["episode_seed"], "episodes_per_lane": test["episodes_per_lane"],
-                        "max_steps": test["max_steps"], "lanes": lanes},
+                        "max_steps": test["max_steps"], "lanes": lanes, **roads},
                "validation": run["validation"], "config": run["config"]}
         write_json(dest / f"{stem}.json", doc)
         written += [checkpoint, dest / f"{stem}.json"]
@@ -450,8 +529,12 @@ def run_protocol(args: argparse.Namespace) -> dict:
                 runs.append(run_seed(cfg, state, args, out_dir, road))
             bar.update()
     env_cfg = dataclasses.replace(next(iter(configs.values())).env, max_steps=args.eval_max_steps)
-    drivers = drive_baselines(env_cfg, args.test_episodes, out_dir)
-    results = summarise(args, road, runs, drivers)
+    if env_cfg.is_allroads:
+        drivers, drivers_by_road = road_baselines(env_cfg, args.test_episodes, out_dir)
+        results = summarise(args, road, runs, drivers, drivers_by_road)
+    else:
+        drivers = drive_baselines(env_cfg, args.test_episodes, out_dir)
+        results = summarise(args, road, runs, drivers)
     results["command"] = command_line()
     write_json(out_dir / "results.json", results)
     table = render_table(results)
@@ -465,9 +548,11 @@ def run_protocol(args: argparse.Namespace) -> dict:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser("protocol", help="the whole evaluation protocol for one method on one road: "
-                                               "train seeds, test the final networks, baselines, table, publish")
-    p.add_argument("--scenario", default="straight", choices=SCENARIOS, help="the road")
+    p = subparsers.add_parser("protocol", help="the whole evaluation protocol for one method on one road (or one "
+                                               "network for all four): train seeds, test the final networks, "
+                                               "baselines, table, publish")
+    p.add_argument("--scenario", default="straight", choices=SCENARIO_CHOICES,
+                   help="the road; allroads: one network for the four roads, tested on each")
     p.add_argument("--method", default="dqfd-bc", help=f"one of {', '.join(METHODS)}")
     p.add_argument("--seeds", default="0,1,2", help="comma-separated training seeds: one run each")
     p.add_argument("--env-steps", type=positive_int, default=600_000, help="env-step budget of each training run")
