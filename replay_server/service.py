@@ -299,6 +299,10 @@ class ReplayServer:
         Without ``replay.restore`` a stale log is deleted: it must never be replayed later."""
         cfg = self.cfg.replay
         wal_dir = wal_log.directory_for(self.checkpoint_dir)
+        unfinished = self.checkpoint_dir.with_name(self.checkpoint_dir.name + ".tmp")
+        if unfinished.exists():  # the previous process died writing it; the next checkpoint clears it
+            print(f"{self.who}: {unfinished} is a checkpoint the previous process died writing: not used (the "
+                  f"last whole checkpoint and the write-ahead log after it are)", flush=True)
         has_checkpoint = (self.checkpoint_dir / "meta.json").exists()
         meta = read_meta(self.checkpoint_dir) if has_checkpoint else {}
         # Generations go on above every one a checkpoint or a segment names (also across restore=false).

@@ -260,3 +260,18 @@ def test_the_config_fields():
         load_run_config(overrides={"replay.wal": "sometimes"})
     with pytest.raises(ConfigError, match=r"^replay\.wal_max_mb"):
         load_run_config(overrides={"replay.wal_max_mb": -1})
+
+
+def test_overwrite_removes_every_replay_log_of_the_previous_run(tmp_path):
+    """A stale log of the run before would be replayed into the new one (same run id, same config)."""
+    import io
+
+    from laneshift.deploy.run_dir import prepare_run_dir
+
+    (tmp_path / "config.yaml").write_text("{}\n")
+    for name in ("replay_checkpoint.wal", "replay_checkpoint_shard1.wal", "replay_checkpoint_shard1"):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "000000000001.wal").write_bytes(b"x")
+    (tmp_path / "replay_stats_shard1.json").write_text("{}")
+    prepare_run_dir(tmp_path, resume=False, overwrite=True, out=io.StringIO())
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
