@@ -120,6 +120,7 @@ class FaultInjector(threading.Thread):
     # move; the signal is sent only if it holds (else SIGCONT, and again 50 ms later). For a state
     # that lasts a moment, such as a checkpoint being written.
     when_stopped: Callable[[], bool] | None = None
+    stops: int = 0  # SIGSTOPs sent for when_stopped
     sig: int = signal.SIGKILL
     timeout_s: float = 300.0
     killed_pid: int | None = None
@@ -139,14 +140,15 @@ class FaultInjector(threading.Thread):
         before = logged_env_steps(self.run_dir)
         pid = int(pid_file.read_text())
         if self.when_stopped is not None:
-            while True:
+            while True:  # seen from outside first (no stop), then again with the process stopped
+                if not _wait_until(self.when_stopped, deadline, self._halt, 0.001):
+                    return
                 os.kill(pid, signal.SIGSTOP)
                 _wait_until(lambda: _all_threads_stopped(pid), time.monotonic() + 2.0, self._halt, 0.001)
+                self.stops += 1
                 if self.when_stopped():
                     break
                 os.kill(pid, signal.SIGCONT)
-                if self._halt.wait(0.05) or time.monotonic() > deadline:
-                    return
         os.kill(pid, self.sig)
         if self.when_stopped is not None and self.sig != signal.SIGKILL:
             os.kill(pid, signal.SIGCONT)
@@ -211,7 +213,7 @@ FAULTS: dict[str, dict] = {
     "replay-after-checkpoint": {"component": "replay-server", "needs": "replay_checkpoint",
                                 "overrides": {"replay.checkpoint_every_s": 0.5}},
     "replay-during-checkpoint": {"component": "replay-server", "needs": "replay_checkpoint", "while": "checkpointing",
-                                 "overrides": {"replay.checkpoint_every_s": 0.02}},
+                                 "overrides": {"replay.checkpoint_every_s": 0.02, "replay.capacity": 10_000}},
     "replay-no-wal": {"component": "replay-server", "overrides": {"replay.checkpoint_every_s": 0, "replay.wal": "off"}},
     # The run dir on a 6 MiB tmpfs that fills up: checkpoints fail (counted, retried), training goes on.
     "disk-full": {"disk_mb": 6, "overrides": {"replay.checkpoint_every_s": 2, "replay.capacity": 60_000}},
@@ -266,7 +268,8 @@ def run_fault(name: str, work: Path, env_steps: int, demos: str | None) -> dict:
     rc = train_local(cfg, out=out)
     inject.stop()
     row: dict = {"fault": name, "rc": rc, "wall_s": round(time.monotonic() - started, 1),
-                 "injected": inject.struck, "recovery_s": inject.recovery_s}
+                 "injected": inject.struck, "recovery_s": inject.recovery_s,
+                 **({"stops": inject.stops} if getattr(inject, "when_stopped", None) else {})}
     try:
         summary = json.loads((run_dir / "summary.json").read_text())
         replay = json.loads((run_dir / "replay_stats.json").read_text())

@@ -114,7 +114,8 @@ class ReplayCore:
         self.identity: dict[str, str] = {}
         self.checkpoint_failures = 0  # checkpoint writes that failed (full disk, read-only dir)
         # The write-ahead log (wal.WriteAheadLog, set by the server; None: none, as in unit tests):
-        # every accepted batch is written to it under the lock, before it is applied.
+        # the service writes each batch to it as it arrives; the core writes phase changes, and
+        # its checkpoints cut it.
         self.wal = None
         self.wal_replayed: dict[str, int] = {}  # what the last start replayed from the log (wal.replay)
         self.http_url: str | None = None  # where this server's HTTP inspection API answers, if on
@@ -135,37 +136,34 @@ class ReplayCore:
         """Validate and store one transitions message. Returns None, or the reason it was refused.
 
         Never raises on bad input: a malformed message is counted by reason and dropped, and it
-        is fully validated before anything is written, so no partial item can be stored. An
-        accepted message goes to the write-ahead log (if any) before it is applied.
+        is fully validated before anything is written, so no partial item can be stored. (The
+        server's write-ahead log has it on disk before this is called: ``wal.py``.)
 
-        ``replaying``: the message comes from the log at a restart (``wal.replay``): it is not
-        logged again, and one whose seq the actor's counters already hold is skipped
-        (``"duplicate"``, not counted anywhere): a replay never stores or counts a batch twice.
+        ``replaying``: the message comes from the log at a restart (``wal.replay``): one whose seq
+        the actor's counters already hold is skipped (``"duplicate"``), and one refused is not
+        counted (it was when it first arrived): a replay never stores or counts a batch twice.
         """
+        reject = (lambda reason: reason) if replaying else self.reject
         try:
             # Views of the payload, not copies: the ring copies them below, before this returns.
             batch = decode_transitions(payload, self.schema, copy=False)
         except WireError as exc:
-            return self.reject(exc.reason)
+            return reject(exc.reason)
         except Exception:  # noqa: BLE001 - a decoder bug must not take the server down
-            return self.reject("decode_failed")
+            return reject("decode_failed")
         if actor_key is not None and actor_key != batch.actor:
-            return self.reject("actor_mismatch")
+            return reject("actor_mismatch")
         n, seq, env_steps = len(batch), batch.seq, batch.env_steps
-        wal = None if replaying or self.wal is None or not self.wal.enabled else self.wal
-        head = wal.head_transitions(payload) if wal is not None else None  # its crc, outside the lock
         with self.lock:
             stats = self.actors.get(batch.actor)
             if stats is None:
                 stats = self._admit(batch.actor)
                 if stats is None:
-                    self.rejected["too_many_actors"] += 1
+                    if not replaying:
+                        self.rejected["too_many_actors"] += 1
                     return "too_many_actors"
             elif replaying and seq <= stats["last_seq"]:
                 return "duplicate"
-            if wal is not None:
-                # On disk (the page cache) before it is applied: a kill -9 from here on loses nothing.
-                wal.write(head, payload)
             now = time.monotonic()
             self._last_seen[batch.actor] = now
             last_seq = stats["last_seq"]
@@ -193,8 +191,6 @@ class ReplayCore:
                 self.selector.stored(self.online, tail, keys)
                 stats["stored"] += n
                 self._rates.add("inserts", n, now)
-        if wal is not None and wal.fsync:
-            wal.sync()  # replay.wal fsync: on the disk too (host loss), outside the lock
         return None
 
     def _admit(self, actor: str) -> dict[str, int] | None:

@@ -1,7 +1,10 @@
 """The replay server process: ReplayCore behind zenoh.
 
 - subscribes to ``laneshift/<run>/transitions/*``; a FIFO channel feeds one ingest thread, so
-  a slow server back-pressures publishers (they use BLOCK) instead of losing data;
+  a slow server back-pressures publishers (they use BLOCK) instead of losing data; with the
+  write-ahead log (``replay.wal``, wal.py) a logger thread drains the channel, writes each batch
+  to the log and queues it (``LOGGED_QUEUE``) for the ingest thread, so what arrived is on disk
+  even while the ingest thread is behind;
 - answers ``.../replay/sample`` (SampleRequest -> BATCH or ERROR), ``.../replay/stats`` (JSON),
   ``.../replay/control`` (JSON commands such as ``{"cmd": "set_phase", "phase": 2}``) and
   ``.../replay/info`` (JSON: the observation shape/dtype and action count TRANSITIONS must have).
@@ -17,6 +20,7 @@ from __future__ import annotations
 import bisect
 import json
 import os
+import queue
 import shutil
 import signal
 import sys
@@ -58,6 +62,11 @@ class SampleLatency:
             return {r: (list(c), self._sums[r]) for r, c in self._counts.items()}
 
 
+#: Batches logged but not yet applied, at most (then the logger waits, and back-pressure goes on
+#: through the zenoh channel to the publishers). They are on disk: none is lost to a kill -9.
+LOGGED_QUEUE = 256
+
+
 class ReplayService:
     """Wires a ReplayCore to a zenoh session. ``start()`` returns at once; ``stop()`` joins."""
 
@@ -74,6 +83,7 @@ class ReplayService:
         # The write-ahead log checkpoints cut (rotate) and trim; it asks for one when it grows too big.
         self.wal = wal
         self.stop_event = threading.Event()
+        self._logged: queue.Queue = queue.Queue(LOGGED_QUEUE)  # (actor, payload, on disk?) for the ingest thread
         # Wakes the checkpoint loop: the log's "too big" signal, or stop().
         self._wake = wal.checkpoint_due if self._wal_bounded else threading.Event()
         self._threads: list[threading.Thread] = []
@@ -91,7 +101,13 @@ class ReplayService:
     def start(self) -> "ReplayService":
         sub = self.ingest_session.declare_subscriber(wire.transitions_wildcard(self.run_id),
                                                      zenoh.handlers.FifoChannel(1024))
-        ingest = threading.Thread(target=self._drain, args=(sub, self._ingest), name="replay-ingest", daemon=True)
+        if self.wal is not None and self.wal.enabled:  # received -> logged (logger) -> applied (ingest)
+            logger = threading.Thread(target=self._drain, args=(sub, self._log), name="replay-wal", daemon=True)
+            ingest = threading.Thread(target=self._apply_logged, name="replay-ingest", daemon=True)
+            logger.start()
+            self._threads.append(logger)
+        else:
+            ingest = threading.Thread(target=self._drain, args=(sub, self._ingest), name="replay-ingest", daemon=True)
         ingest.start()
         self._threads.append(ingest)
         prio_sub = self.session.declare_subscriber(wire.priorities_key(self.run_id), zenoh.handlers.FifoChannel(256))
@@ -136,6 +152,49 @@ class ReplayService:
             self.core.reject("bad_key")
             return
         self.core.ingest(sample.payload.to_bytes(), actor)
+
+    def _log(self, sample: zenoh.Sample) -> None:
+        """The logger thread: a received batch onto the log, then into the ingest thread's queue."""
+        try:
+            actor = wire.actor_from_transitions_key(str(sample.key_expr))
+        except ValueError:
+            self.core.reject("bad_key")
+            return
+        payload = sample.payload.to_bytes()
+        item = (actor, payload, self.wal.write_transitions(actor, payload))
+        while True:  # blocks while the queue is full (back-pressure); ends with the service
+            try:
+                self._logged.put(item, timeout=0.1)
+                return
+            except queue.Full:
+                if self.stop_event.is_set():
+                    return  # on disk: the next start replays it
+
+    def _apply_logged(self) -> None:
+        """The ingest thread with a log: apply each logged batch, then tell the log. Goes on after
+        stop() until the queue is empty, so the final checkpoint has what was logged."""
+        while True:
+            try:
+                actor, payload, logged = self._logged.get(timeout=0.1)
+            except queue.Empty:
+                if self.stop_event.is_set():
+                    return
+                continue
+            try:
+                self.core.ingest(payload, actor)
+            except Exception:  # noqa: BLE001 - never let one message stop the thread
+                self.core.reject("internal_error")
+            finally:
+                if logged:
+                    self.wal.applied()
+                self._logged.task_done()
+
+    def drain(self, timeout_s: float) -> bool:
+        """Wait (at most ``timeout_s``) until every logged batch is applied: before a final checkpoint."""
+        deadline = time.monotonic() + timeout_s
+        while self._logged.unfinished_tasks and time.monotonic() < deadline:
+            time.sleep(0.01)
+        return not self._logged.unfinished_tasks
 
     def _flow_loop(self, period_s: float = 0.01, heartbeat_s: float = 0.25) -> None:
         """Tell actors whether they may insert: on every change, and as a heartbeat."""
@@ -346,6 +405,7 @@ class ReplayServer:
         """Final checkpoint (SIGTERM/SIGINT keep everything received), stats file, sessions closed."""
         self._stop.set()
         self.service.stop()
+        self.service.drain(timeout_s=10.0)  # what was logged goes into the table before the final checkpoint
         final_ckpt = self.service.checkpoint()
         if final_ckpt:
             print(f"{self.who}: final checkpoint of {final_ckpt['items']} items in {final_ckpt['seconds']} s",

@@ -1,12 +1,16 @@
-"""The replay server's write-ahead log: every batch the core accepts is written to disk before it
-goes into the table, so a kill -9 of the server loses only what had not reached it yet.
+"""The replay server's write-ahead log: every batch the server receives is written to disk before
+it goes into the table, so a kill -9 of the server loses only what had not reached it yet.
 
 What it protects against: the death of the replay server's process (kill -9, an OOM kill, a
-crash). Each accepted batch is written with one ``write()`` under the core's lock, before it is
-applied; once ``write()`` has returned, the bytes are in the kernel's page cache, which outlives
-the process. That is not host loss (power, a kernel panic): ``replay.wal: fsync`` also fsyncs
-each record (after the core's lock is released), for a cost measured in docs/RELIABILITY.md.
-Host loss is otherwise the periodic checkpoint's job (``replay.checkpoint_every_s``).
+crash). The service's logger thread takes each batch off the zenoh channel as it arrives, writes
+it here with one ``write()`` (``write_transitions``) and hands it to the ingest thread, which
+applies it (``ReplayCore.ingest``, which validates it) and then says so (``applied``). Once
+``write()`` has returned the bytes are in the kernel's page cache, which outlives the process:
+batches waiting behind a slow ingest (a checkpoint's copy, a burst) are as safe as stored ones,
+and the write never holds the core's lock (a stall in it never delays a sample). That is not
+host loss (power, a kernel panic): ``replay.wal: fsync`` also fsyncs each record, for a cost
+measured in docs/RELIABILITY.md. Host loss is otherwise the periodic checkpoint's job
+(``replay.checkpoint_every_s``).
 
 Layout of ``<run dir>/replay_checkpoint.wal/`` (beside the checkpoint, which each write replaces
 whole): segments ``<generation>.wal``, generation numbers rising for the life of the run dir.
@@ -15,27 +19,29 @@ A segment is a sequence of records::
     u32 body length | u32 crc32 of (kind byte + body) | u8 kind | body      (little endian)
 
 Kinds: 0 HEADER (JSON: format, generation, the run's identity), the first record of every
-segment; 1 TRANSITIONS (the batch's wire bytes, as received and validated); 2 PHASE (one byte:
-the phase the learner set). A record that a kill cut short (its length runs past the end of the
+segment; 1 TRANSITIONS (u16 length + the actor named by the message's key, then the message's
+wire bytes as received: replay validates them as the live ingest did, refusing what it refused,
+uncounted); 2 PHASE (one byte: the phase the learner set). A record that a kill cut short (its length runs past the end of the
 file: ``torn``) or whose crc does not match (``corrupt``) ends its segment: it and whatever
 follows it in that segment are dropped, counted and cut off the file (so a later restart does
 not count them again). The batches they held show up as seq gaps: counted as lost.
 
 With checkpoints: a checkpoint starts a new segment (``rotate``) at the instant it fixes its cut
-(the table's insert counter), under the core's lock, so every batch applied before the cut is in
-the checkpoint and every batch applied after it is in a segment of that generation or a later
-one. The checkpoint records that generation (``meta.json`` ``wal_from``); once it is in place
-the older segments are deleted (``segments_done``). A restart restores the checkpoint, then
-replays the segments from ``wal_from`` on, oldest first, through ``ReplayCore.ingest`` (with
-``replaying``: a batch whose seq the actor's state already holds is skipped, never stored or
-counted twice).
+(the table's insert counter), under the core's lock. Every batch applied before the cut is in the
+checkpoint; every batch applied after it was written to the new segment or, if it was already
+written but not yet applied (``pending``), to an older one: ``rotate`` returns the generation of
+the oldest pending record (the new one's if none), which the checkpoint records (``meta.json``
+``wal_from``); once it is in place the segments before that are deleted (``segments_done``). A
+restart restores the checkpoint, then replays the segments from ``wal_from`` on, oldest first,
+through ``ReplayCore.ingest`` with ``replaying``: a batch whose seq the actor's counters already
+hold (applied before the cut) is skipped, so nothing is stored or counted twice.
 
 Bounded: the log holds what arrived since the last completed checkpoint; past ``max_bytes``
 (``replay.wal_max_mb``) it asks for a checkpoint at once (``checkpoint_due``).
 
     >>> import tempfile
     >>> log = WriteAheadLog(Path(tempfile.mkdtemp()), "write", {"run_id": "r"}, 0, first_gen=1)
-    >>> log.write(log.head_transitions(b"abc"), b"abc")
+    >>> log.write_transitions("w0", b"abc")
     True
     >>> [kind for kind, _, _ in scan(log.path(1).read_bytes())[0]]
     [0, 1]
@@ -46,6 +52,7 @@ component.
 
 from __future__ import annotations
 
+import collections
 import json
 import mmap
 import os
@@ -67,6 +74,7 @@ HEADER, TRANSITIONS, PHASE = 0, 1, 2
 KINDS = (HEADER, TRANSITIONS, PHASE)
 MODES = ("off", "write", "fsync")
 _HEAD = struct.Struct("<IIB")  # body length, crc32 of kind + body, kind
+_ACTOR = struct.Struct("<H")  # TRANSITIONS: the actor name's length, before the name and the message
 SUFFIX = ".wal"
 COMPLAIN_EVERY_S = 30.0  # at most one line on stderr per this many seconds about failing writes
 
@@ -94,9 +102,18 @@ def segments(directory: Path) -> list[tuple[int, Path]]:
     return sorted(out)
 
 
-def head(kind: int, body: bytes | bytearray | memoryview) -> bytes:
-    """A record's 9 bytes before its body."""
-    return _HEAD.pack(len(body), zlib.crc32(body, zlib.crc32(bytes((kind,)))), kind)
+def head(kind: int, *parts: bytes | bytearray | memoryview) -> bytes:
+    """A record's 9 bytes before its body (``parts``, one after the other)."""
+    crc = zlib.crc32(bytes((kind,)))
+    for part in parts:
+        crc = zlib.crc32(part, crc)
+    return _HEAD.pack(sum(len(p) for p in parts), crc, kind)
+
+
+def transitions_body(body: memoryview) -> tuple[str, memoryview]:
+    """A TRANSITIONS record's (actor, message)."""
+    (n,) = _ACTOR.unpack_from(body)
+    return bytes(body[_ACTOR.size:_ACTOR.size + n]).decode(), body[_ACTOR.size + n:]
 
 
 def scan(buf: bytes | bytearray | memoryview | mmap.mmap) -> tuple[list[tuple[int, int, int]], int, str | None]:
@@ -122,23 +139,26 @@ def scan(buf: bytes | bytearray | memoryview | mmap.mmap) -> tuple[list[tuple[in
         view.release()
 
 
-def _write_all(fd: int, first: bytes, body: bytes | bytearray | memoryview) -> None:
-    total = len(first) + len(body)
-    done = os.writev(fd, (first, body))
+def _write_all(fd: int, parts: tuple[bytes | bytearray | memoryview, ...]) -> int:
+    total = sum(len(p) for p in parts)
+    done = os.writev(fd, parts)
     if done < total:  # a short write (rare on a regular file): the rest, from where it stopped
-        rest = memoryview(first + bytes(body))[done:]
+        rest = memoryview(b"".join(bytes(p) for p in parts))[done:]
         while rest:
             rest = rest[os.write(fd, rest):]
+    return total
 
 
 class WriteAheadLog:
     """The log a running server appends to (``mode`` write or fsync), or, with ``mode`` off, only
     the generation counter the checkpoints cut at and the deletion of segments a checkpoint holds.
 
-    ``write`` and ``rotate`` are called under the core's lock (that is what orders records against
-    a checkpoint's cut); ``sync`` (fsync mode) after it is released. A write that fails (a full
-    disk, a read-only dir) is counted and reported, the batch is still applied (it is in memory,
-    and in the next checkpoint), and the next write starts a fresh segment.
+    ``write_transitions`` (the logger thread) and ``applied`` (the ingest thread, once the core has
+    taken the batch) keep the records written but not yet applied (``pending``); ``rotate`` (a
+    checkpoint's cut, under the core's lock) and ``write_phase`` (under the core's lock) order
+    themselves against them through this object's own lock. A write that fails (a full disk, a
+    read-only dir) is counted and reported, the batch is still applied (it is in memory, and in
+    the next checkpoint), and the next write starts a fresh segment.
     """
 
     def __init__(self, directory: Path, mode: str, identity: dict[str, str], max_bytes: int, first_gen: int,
@@ -152,6 +172,7 @@ class WriteAheadLog:
         self._fd: int | None = None
         self._fresh = True  # the current segment holds its header only
         self._closed = False
+        self._pending: collections.deque[int] = collections.deque()  # generations of records written, not applied
         # Bytes of each segment a restart would replay (those from before this process included).
         self._sizes: dict[int, int] = dict(kept or {})
         self._lock = threading.Lock()  # the fd: write/sync (ingest thread) against rotate/close (checkpoints)
@@ -168,48 +189,39 @@ class WriteAheadLog:
 
     # ------------------------------------------------------------------ writing
 
-    def head_transitions(self, payload: bytes | bytearray | memoryview) -> bytes:
-        """The head of a TRANSITIONS record for ``payload`` (its crc: computed before the lock is taken)."""
-        return head(TRANSITIONS, payload)
-
-    def write(self, first: bytes, body: bytes | bytearray | memoryview) -> bool:
-        """Append one record (``first``: its head). Call under the core's lock. False if it failed (counted)."""
+    def write_transitions(self, actor: str, payload: bytes | bytearray | memoryview) -> bool:
+        """Log a received TRANSITIONS message (``actor``: the one its key names) before it is
+        applied. True if it is on disk (then ``applied()`` must follow once the core has taken or
+        refused it); False if not (log off, or the write failed: counted)."""
         if not self.enabled:
             return False
+        name = actor.encode()
+        prefix = _ACTOR.pack(len(name)) + name
+        first = head(TRANSITIONS, prefix, payload)  # the crc, before the lock is taken
         with self._lock:
-            if self._closed:
+            if not self._append((first, prefix, payload)):
                 return False
-            if self._fd is None and not self._open(self.gen + 1):
-                return False
-            try:
-                _write_all(self._fd, first, body)
-            except OSError as exc:
-                self._failed(exc, drop_segment=False)
-                return False
-            n = len(first) + len(body)
-            self._sizes[self.gen] = self._sizes.get(self.gen, 0) + n
-            self._fresh = False
-            self.appended += 1
-            self.appended_bytes += n
-            if self.max_bytes and not self.checkpoint_due.is_set() and self.bytes > self.max_bytes:
-                self.checkpoint_due.set()
+            self._pending.append(self.gen)
             return True
 
-    def write_phase(self, phase: int) -> bool:
-        body = bytes((phase,))
-        return self.write(head(PHASE, body), body)
-
-    def sync(self) -> None:
-        """fsync the current segment (fsync mode; after the core's lock is released)."""
+    def applied(self) -> None:
+        """The oldest pending record has been applied (or refused) by the core."""
         with self._lock:
-            if self._fd is not None:
-                try:
-                    os.fsync(self._fd)
-                except OSError as exc:
-                    self._failed(exc, drop_segment=True)
+            if self._pending:
+                self._pending.popleft()
+
+    def write_phase(self, phase: int) -> bool:
+        """Log a phase change (under the core's lock, as the core makes it)."""
+        if not self.enabled:
+            return False
+        body = bytes((phase,))
+        with self._lock:
+            return self._append((head(PHASE, body), body))
 
     def rotate(self) -> int:
-        """Start a new segment and return its generation (call under the core's lock: a checkpoint's cut)."""
+        """Start a new segment (call under the core's lock: a checkpoint's cut). Returns the first
+        generation a restart must replay after the checkpoint: the oldest record written but not
+        yet applied, else the new segment's."""
         with self._lock:
             if self._closed:
                 return self.gen
@@ -217,7 +229,7 @@ class WriteAheadLog:
             self.gen += 1
             if self.enabled:
                 self._open(self.gen)
-            return self.gen
+            return self._pending[0] if self._pending else self.gen
 
     def segments_done(self, wal_from: int) -> None:
         """A checkpoint that holds everything before segment ``wal_from`` is in place: delete those
@@ -255,9 +267,33 @@ class WriteAheadLog:
         with self._lock:
             return {"mode": self.mode, "generation": self.gen, "segments": len(self._sizes), "bytes": self.bytes,
                     "max_bytes": self.max_bytes, "records_written": self.appended, "bytes_written": self.appended_bytes,
-                    "failures": self.failures, **({"last_error": self.last_error} if self.last_error else {})}
+                    "pending": len(self._pending), "failures": self.failures,
+                    **({"last_error": self.last_error} if self.last_error else {})}
 
     # ------------------------------------------------------------------ internals (under self._lock)
+
+    def _append(self, parts: tuple[bytes | bytearray | memoryview, ...]) -> bool:
+        """Write one record (its head first) at the end of the current segment (a new one if the
+        last write failed); in fsync mode fsync it. False if that failed (counted)."""
+        if self._closed or (self._fd is None and not self._open(self.gen + 1)):
+            return False
+        try:
+            n = _write_all(self._fd, parts)
+        except OSError as exc:
+            self._failed(exc, drop_segment=False)
+            return False
+        self._sizes[self.gen] = self._sizes.get(self.gen, 0) + n
+        self._fresh = False
+        self.appended += 1
+        self.appended_bytes += n
+        if self.fsync:
+            try:
+                os.fsync(self._fd)
+            except OSError as exc:  # the record may be in the page cache only: counted, a new segment next
+                self._failed(exc, drop_segment=True)
+        if self.max_bytes and not self.checkpoint_due.is_set() and self.bytes > self.max_bytes:
+            self.checkpoint_due.set()
+        return True
 
     def _open(self, gen: int) -> bool:
         """Create segment ``gen`` with its header; on failure count it and leave no fd (the next
@@ -273,7 +309,7 @@ class WriteAheadLog:
             self._failed(exc, drop_segment=True)
             return False
         try:
-            _write_all(fd, head(HEADER, header), header)
+            _write_all(fd, (head(HEADER, header), header))
         except OSError as exc:
             os.close(fd)
             try:
@@ -381,7 +417,8 @@ def replay(core: "ReplayCore", directory: Path, from_gen: int | None) -> dict[st
             try:
                 for kind, start, stop in records[1:]:
                     if kind == TRANSITIONS:
-                        reason = core.ingest(view[start:stop], replaying=True)
+                        actor, message = transitions_body(view[start:stop])
+                        reason = core.ingest(message, actor, replaying=True)
                         key = "batches" if reason is None else "duplicates" if reason == "duplicate" else "refused"
                         done[key] += 1
                     elif kind == PHASE:

@@ -133,7 +133,7 @@ def test_replay_server_killed_while_writing_a_checkpoint_loses_at_most_a_batch_p
     run_dir = tmp_path / "run"
     run_dir_, summary, replay, text = run_with_fault(
         tmp_path, "replay-server", at_steps=2000, extra=lambda: (run_dir / "replay_checkpoint" / "meta.json").exists(),
-        when_stopped=checkpointing(run_dir), **{"replay.checkpoint_every_s": 0.02})
+        when_stopped=checkpointing(run_dir), **FAULTS["replay-during-checkpoint"]["overrides"])
     log = (run_dir / "logs" / "replay-server.log").read_text()
     assert "a checkpoint the previous process died writing" in log and "from the write-ahead log" in log, log
     assert_lost_at_most_a_batch_per_worker(summary)

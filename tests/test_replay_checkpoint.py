@@ -296,6 +296,17 @@ def test_restored_counters_match_the_resume_point_so_nothing_is_stored_twice(tmp
     assert (w0["stored"], w0["items"], w0["batches"], w0["lost_items"]) == (40, 40, 4, 0)
 
 
+def receive(core: ReplayCore, payload: bytes) -> str | None:
+    """What the service does with a received batch: log it (if the core has a log), apply it, tell the log."""
+    actor = wire.decode_transitions(payload, SCHEMA).actor
+    logged = core.wal is not None and core.wal.write_transitions(actor, payload)
+    try:
+        return core.ingest(payload, actor)
+    finally:
+        if logged:
+            core.wal.applied()
+
+
 def _row_bytes(core: ReplayCore) -> int:
     import laneshift.replay_server.checkpoint as ckpt
 
@@ -322,10 +333,10 @@ def test_a_batch_caught_in_part_beside_a_later_one_caught_whole_is_restored_or_c
     core = ReplayCore(ReplayConfig(capacity=100, min_size=1), SCHEMA)
     core.wal = W.WriteAheadLog(tmp_path / "wal", wal, {}, 0, first_gen=1)
     for seq in range(4):  # rows 0-39
-        assert core.ingest(batch(seq)) is None
+        assert receive(core, batch(seq)) is None
     monkeypatch.setattr(ckpt, "CHUNK_BYTES", 5 * _row_bytes(core))  # 5 rows a chunk
     # Lock holds: the cut, then chunks of rows 0-4, 5-9, ..., 40-44 (the 10th): then the batches.
-    core.lock = _CopyHook(core.lock, after=10, action=lambda: [core.ingest(batch(4)), core.ingest(batch(5))])
+    core.lock = _CopyHook(core.lock, after=10, action=lambda: [receive(core, batch(4)), receive(core, batch(5))])
     write_checkpoint(core, tmp_path / "ckpt", core.wal)
     keys = np.load(tmp_path / "ckpt" / "key.npy")
     assert set(keys[45:60].tolist()) == set(range(45, 60)) and (keys[40:45] == -1).all()  # what the copy caught
@@ -356,7 +367,7 @@ class _Races:
             self.inserting = True
             try:
                 for payload in self.actions.pop(self.count, ()):
-                    assert self.core.ingest(payload) is None
+                    assert receive(self.core, payload) is None
             finally:
                 self.inserting = False
             if self.count == 1:
@@ -397,7 +408,7 @@ def test_kill_after_a_checkpoint_raced_by_inserts_restores_or_counts_every_item(
     core.wal = W.WriteAheadLog(tmp_path / "wal", wal, {}, 0, first_gen=1)
     for seq in range(2):
         for actor in "abc":
-            core.ingest(batch(seq, actor=actor))  # 60 rows
+            receive(core, batch(seq, actor=actor))  # 60 rows
     monkeypatch.setattr(ckpt, "CHUNK_BYTES", 3 * _row_bytes(core))
     real_lock = core.lock
     core.lock = _Races(real_lock, {k: [batch(s, actor=a) for a, s in v] for k, v in SCHEDULES[schedule].items()},
@@ -408,7 +419,7 @@ def test_kill_after_a_checkpoint_raced_by_inserts_restores_or_counts_every_item(
             for a in "abc"}
     for actor in "abc":  # after the checkpoint, before the kill
         sent[actor] += 1
-        core.ingest(batch(sent[actor], actor=actor))
+        receive(core, batch(sent[actor], actor=actor))
     fresh, done = _restart(tmp_path)
     if wal == "write":
         assert done["torn"] == done["corrupt"] == done["duplicates"] == 0

@@ -40,6 +40,18 @@ def new_core(capacity: int = 1000, **kw) -> ReplayCore:
     return core
 
 
+def receive(core: ReplayCore, payload: bytes, actor: str | None = None) -> str | None:
+    """What the service does with a received batch: log it, apply it, tell the log."""
+    if actor is None:
+        actor = wire.decode_transitions(payload, SCHEMA).actor
+    logged = core.wal.write_transitions(actor, payload)
+    try:
+        return core.ingest(payload, actor)
+    finally:
+        if logged:
+            core.wal.applied()
+
+
 def logged_core(directory: Path, mode: str = "write", capacity: int = 1000, max_bytes: int = 0,
                 **kw) -> ReplayCore:
     core = new_core(capacity, **kw)
@@ -62,17 +74,19 @@ def items(core: ReplayCore) -> list[int]:
     return sorted(int(x) for x in t.reward[:t.size])
 
 
-def test_every_accepted_batch_is_replayed_and_rejected_ones_are_not(tmp_path):
+def test_every_batch_is_replayed_and_one_refused_is_refused_again_uncounted(tmp_path):
     core = logged_core(tmp_path / "wal")
     for seq in range(5):
-        assert core.ingest(batch(seq)) is None
-    assert core.ingest(b"garbage") is not None  # refused: never logged
-    assert core.ingest(batch(5, actor="w1"), actor_key="w0") == "actor_mismatch"
+        assert receive(core, batch(seq)) is None
+    assert receive(core, b"garbage", "w0") == "truncated"  # logged as received, refused when applied
+    assert receive(core, batch(5, actor="w1"), "w0") == "actor_mismatch"  # the key's actor is logged too
+    assert core.rejected == {"truncated": 1, "actor_mismatch": 1}
     fresh, done = restart(tmp_path / "wal")
-    assert done["batches"] == 5 and done["items"] == 50 and done["torn"] == done["corrupt"] == 0
+    assert (done["batches"], done["refused"], done["items"]) == (5, 2, 50)
+    assert done["torn"] == done["corrupt"] == 0
     assert items(fresh) == list(range(50))
     assert fresh.actors == core.actors
-    assert fresh.rejected == {}  # the refused messages were never in the log
+    assert fresh.rejected == {}  # counted when they arrived, not again
     assert fresh.actor_state("w0") == {"env_steps": 50, "next_seq": 5, "known": 1}
 
 
@@ -83,10 +97,11 @@ def test_a_torn_tail_is_dropped_once_counted_and_its_batch_counted_lost(tmp_path
     second restart does not count it again), and its batch is a seq gap: counted as lost."""
     core = logged_core(tmp_path / "wal")
     for seq in range(4):
-        core.ingest(batch(seq))
+        receive(core, batch(seq))
     (gen, path), = W.segments(tmp_path / "wal")
     whole = path.stat().st_size
-    last = len(W.head(W.TRANSITIONS, batch(3))) + len(batch(3))
+    records, _, _ = W.scan(path.read_bytes())
+    last = whole - (records[-1][1] - len(W.head(W.TRANSITIONS, b"")))  # the last record, head and body
     os.truncate(path, whole - last + cut if cut > 0 else whole + cut)
     fresh, done = restart(tmp_path / "wal")
     assert (done["batches"], done["torn"], done["corrupt"]) == (3, 1, 0)
@@ -105,10 +120,10 @@ def test_a_torn_tail_is_dropped_once_counted_and_its_batch_counted_lost(tmp_path
 def test_a_corrupt_record_ends_its_segment_and_the_later_segments_still_count(tmp_path):
     core = logged_core(tmp_path / "wal")
     for seq in range(3):
-        core.ingest(batch(seq))
+        receive(core, batch(seq))
     core.wal.rotate()  # a second segment (as a checkpoint's cut would start, had it completed)
     for seq in range(3, 5):
-        core.ingest(batch(seq))
+        receive(core, batch(seq))
     (_, first), (_, second) = W.segments(tmp_path / "wal")
     data = bytearray(first.read_bytes())
     data[-100] ^= 0xFF  # a flipped byte in the last record of the first segment
@@ -124,7 +139,7 @@ def test_a_corrupt_record_ends_its_segment_and_the_later_segments_still_count(tm
 def test_replay_is_idempotent_a_batch_the_core_holds_is_skipped(tmp_path):
     core = logged_core(tmp_path / "wal")
     for seq in range(4):
-        core.ingest(batch(seq))
+        receive(core, batch(seq))
     fresh, done = restart(tmp_path / "wal")
     before = {k: dict(v) for k, v in fresh.actors.items()}
     again = W.replay(fresh, tmp_path / "wal", None)  # the same segments once more
@@ -133,14 +148,34 @@ def test_replay_is_idempotent_a_batch_the_core_holds_is_skipped(tmp_path):
     assert fresh.rejected == {} and fresh.online.inserted == 40
 
 
+def test_a_batch_logged_before_the_cut_and_applied_after_it_is_replayed(tmp_path):
+    """The ingest thread may be behind the logger: at the cut a batch can be on disk in the old
+    segment, not yet applied. The checkpoint then starts its replay at that segment; the batches
+    there that it holds are skipped by their seq."""
+    core = logged_core(tmp_path / "wal")
+    receive(core, batch(0))
+    assert core.wal.write_transitions("w0", batch(1))  # logged, waiting for the ingest thread
+    first = core.wal.gen
+    info = write_checkpoint(core, tmp_path / "ckpt", core.wal)
+    assert info["wal_from"] == first < core.wal.gen  # the old segment is kept
+    assert core.ingest(batch(1), "w0") is None  # now applied: after the cut
+    core.wal.applied()
+    receive(core, batch(2))
+    fresh, done = restart(tmp_path / "wal", tmp_path / "ckpt")
+    assert (done["segments"], done["batches"], done["duplicates"]) == (2, 2, 1)
+    assert items(fresh) == list(range(30)) and fresh.actors == core.actors
+    write_checkpoint(core, tmp_path / "ckpt", core.wal)  # nothing pending: the old segments go
+    assert [g for g, _ in W.segments(tmp_path / "wal")] == [core.wal.gen]
+
+
 def test_a_checkpoint_cuts_the_log_and_restart_replays_only_after_the_cut(tmp_path):
     core = logged_core(tmp_path / "wal")
     for seq in range(5):
-        core.ingest(batch(seq))
+        receive(core, batch(seq))
     info = write_checkpoint(core, tmp_path / "ckpt", core.wal)
     assert [g for g, _ in W.segments(tmp_path / "wal")] == [info["wal_from"]]  # the older one deleted
     for seq in range(5, 8):
-        core.ingest(batch(seq))
+        receive(core, batch(seq))
     fresh, done = restart(tmp_path / "wal", tmp_path / "ckpt")
     assert (done["segments"], done["batches"], done["items"]) == (1, 3, 30)
     assert items(fresh) == list(range(80)) and fresh.actors == core.actors
@@ -151,12 +186,12 @@ def test_segments_a_completed_checkpoint_holds_are_not_replayed(tmp_path):
     deletes them instead of replaying them on top of the checkpoint."""
     core = logged_core(tmp_path / "wal")
     for seq in range(5):
-        core.ingest(batch(seq))
+        receive(core, batch(seq))
     kept = {p.name: p.read_bytes() for _, p in W.segments(tmp_path / "wal")}
     write_checkpoint(core, tmp_path / "ckpt", core.wal)
     for name, data in kept.items():
         (tmp_path / "wal" / name).write_bytes(data)  # as if the deletion never happened
-    core.ingest(batch(5))
+    receive(core, batch(5))
     fresh, done = restart(tmp_path / "wal", tmp_path / "ckpt")
     assert (done["segments"], done["batches"], done["duplicates"]) == (1, 1, 0)
     assert items(fresh) == list(range(60)) and fresh.actors == core.actors
@@ -169,9 +204,9 @@ def test_the_phase_change_is_replayed_between_the_batches_around_it(tmp_path):
     demo = DemoTable(obs, np.zeros(n, np.int64), np.zeros(n, np.float32), obs, np.zeros(n, np.uint8), "d", {})
     core = ReplayCore(ReplayConfig(capacity=100, min_size=1, demo_mode="rehearsal"), SCHEMA, demo)
     core.wal = W.WriteAheadLog(tmp_path / "wal", "write", {}, 0, first_gen=1)
-    core.ingest(batch(0))  # phase 1: counted, not stored
+    receive(core, batch(0))  # phase 1: counted, not stored
     core.set_phase(2)
-    core.ingest(batch(1))
+    receive(core, batch(1))
     fresh = ReplayCore(ReplayConfig(capacity=100, min_size=1, demo_mode="rehearsal"), SCHEMA, demo)
     done = W.replay(fresh, tmp_path / "wal", None)
     assert done["phase_records"] == 1 and fresh.phase == 2
@@ -181,7 +216,7 @@ def test_the_phase_change_is_replayed_between_the_batches_around_it(tmp_path):
 
 def test_a_log_of_another_run_is_refused(tmp_path):
     core = logged_core(tmp_path / "wal")
-    core.ingest(batch(0))
+    receive(core, batch(0))
     other = new_core()
     other.identity = {**IDENTITY, "run_id": "other"}
     with pytest.raises(W.WalError, match="run_id 'run', this run has 'other'"):
@@ -190,7 +225,7 @@ def test_a_log_of_another_run_is_refused(tmp_path):
 
 def test_a_failed_write_is_counted_the_batch_still_applied_and_the_log_goes_on(tmp_path, monkeypatch):
     core = logged_core(tmp_path / "wal")
-    core.ingest(batch(0))
+    receive(core, batch(0))
     real = os.writev
     calls = {"n": 0}
 
@@ -202,9 +237,9 @@ def test_a_failed_write_is_counted_the_batch_still_applied_and_the_log_goes_on(t
         return real(fd, parts)
 
     monkeypatch.setattr(W.os, "writev", full_disk)
-    assert core.ingest(batch(1)) is None  # applied in memory all the same
+    assert receive(core, batch(1)) is None  # applied in memory all the same
     assert core.stats()["wal"]["failures"] == 1
-    core.ingest(batch(2))
+    receive(core, batch(2))
     assert items(core) == list(range(30))
     fresh, done = restart(tmp_path / "wal")
     assert done["torn"] == done["corrupt"] == 0  # the part-record was cut off again at once
@@ -217,10 +252,10 @@ def test_a_failed_write_is_counted_the_batch_still_applied_and_the_log_goes_on(t
 def test_the_log_asks_for_a_checkpoint_past_its_bound_and_is_cut_back(tmp_path):
     core = logged_core(tmp_path / "wal", max_bytes=3 * len(batch(0)))
     for seq in range(2):
-        core.ingest(batch(seq))
+        receive(core, batch(seq))
     assert not core.wal.checkpoint_due.is_set()
     for seq in range(2, 4):
-        core.ingest(batch(seq))
+        receive(core, batch(seq))
     assert core.wal.checkpoint_due.is_set()
     info = write_checkpoint(core, tmp_path / "ckpt", core.wal)
     assert not core.wal.checkpoint_due.is_set() and core.wal.bytes < len(batch(0))  # the new segment's header
@@ -229,12 +264,12 @@ def test_the_log_asks_for_a_checkpoint_past_its_bound_and_is_cut_back(tmp_path):
 
 def test_a_clean_close_leaves_no_empty_segment_and_off_writes_nothing(tmp_path):
     core = logged_core(tmp_path / "wal")
-    core.ingest(batch(0))
+    receive(core, batch(0))
     write_checkpoint(core, tmp_path / "ckpt", core.wal)  # the final checkpoint: a new, empty segment
     core.wal.close()
     assert W.segments(tmp_path / "wal") == []
     off = logged_core(tmp_path / "off", mode="off")
-    off.ingest(batch(0))
+    receive(off, batch(0))
     assert not (tmp_path / "off").exists() and off.stats()["wal"]["mode"] == "off"
     info = write_checkpoint(off, tmp_path / "ckpt2", off.wal)
     assert info["wal_from"] == 2  # generations still count, so a later log's segments sort after the cut
@@ -246,7 +281,7 @@ def test_fsync_mode_syncs_every_record(tmp_path, monkeypatch):
     monkeypatch.setattr(W.os, "fsync", lambda fd: (synced.append(fd), real(fd)))
     core = logged_core(tmp_path / "wal", mode="fsync")
     for seq in range(3):
-        core.ingest(batch(seq))
+        receive(core, batch(seq))
     assert len(synced) == 3
     fresh, done = restart(tmp_path / "wal")
     assert done["batches"] == 3
