@@ -363,15 +363,21 @@ class ReplayServer:
             print(f"{self.who}: {unfinished} is a checkpoint the previous process died writing: not used (the "
                   f"last whole checkpoint and the write-ahead log after it are)", flush=True)
         has_checkpoint = (self.checkpoint_dir / "meta.json").exists()
-        meta = read_meta(self.checkpoint_dir) if has_checkpoint else {}
+        try:
+            meta = read_meta(self.checkpoint_dir) if has_checkpoint else {}
+        except CheckpointError:
+            if cfg.restore:
+                raise
+            meta = {}  # not restored anyway
         # Generations go on above every one a checkpoint or a segment names (also across restore=false).
         after = max(wal_log.last_generation(wal_dir), int(meta.get("wal_from") or 0))
         if cfg.restore:
             if has_checkpoint:
                 self.restored = restore_checkpoint(core, self.checkpoint_dir)
                 print(f"{self.who}: restored {self.restored} items from {self.checkpoint_dir}", flush=True)
-            done = core.wal_replayed = wal_log.replay(core, wal_dir, meta.get("wal_from"))
+            done = wal_log.replay(core, wal_dir, meta.get("wal_from"))
             if done["segments"]:
+                core.wal_replayed = done
                 self.restored += done["items"]
                 torn = done["torn"] + done["corrupt"]
                 print(f"{self.who}: replayed {done['batches']} batches ({done['items']} items) from the write-ahead "

@@ -21,7 +21,9 @@ A segment is a sequence of records::
 Kinds: 0 HEADER (JSON: format, generation, the run's identity), the first record of every
 segment; 1 TRANSITIONS (u16 length + the actor named by the message's key, then the message's
 wire bytes as received: replay validates them as the live ingest did, refusing what it refused,
-uncounted); 2 PHASE (one byte: the phase the learner set). A record that a kill cut short (its length runs past the end of the
+uncounted); 2 PHASE (one byte: the phase the learner set, written as the core makes the change;
+workers act only on the phase-2 network, published after the server's phase changed, so no batch
+the change decides arrives before it). A record that a kill cut short (its length runs past the end of the
 file: ``torn``) or whose crc does not match (``corrupt``) ends its segment: it and whatever
 follows it in that segment are dropped, counted and cut off the file (so a later restart does
 not count them again). The batches they held show up as seq gaps: counted as lost.
@@ -175,7 +177,7 @@ class WriteAheadLog:
         self._pending: collections.deque[int] = collections.deque()  # generations of records written, not applied
         # Bytes of each segment a restart would replay (those from before this process included).
         self._sizes: dict[int, int] = dict(kept or {})
-        self._lock = threading.Lock()  # the fd: write/sync (ingest thread) against rotate/close (checkpoints)
+        self._lock = threading.Lock()  # the fd and pending: logger and ingest threads, checkpoints, phase changes
         self.checkpoint_due = threading.Event()  # set when the log outgrows max_bytes
         self.appended = self.appended_bytes = self.failures = 0
         self._complained = 0.0
