@@ -90,6 +90,30 @@ class _LogStream:
         return getattr(self._stream, name)
 
 
+def _never_hang_at_exit() -> None:
+    """End this actor's process at once when its interpreter shuts down, instead of waiting for
+    zenoh's callback threads.
+
+    Why: zenoh-python runs a subscriber's Python callback on a thread of its own that is not a
+    daemon and ends only when the subscriber or its session closes. When an actor's process ends
+    without closing them (its raylet died with a launcher that was killed -9), CPython's shutdown
+    joins those threads for ever: a learner actor was found two hours later, orphaned, its main
+    thread in ``threading._shutdown``. By then the component has written everything it keeps
+    (checkpoints are written by its own loops and at stop), so flushing the log streams and
+    ``os._exit`` lose nothing; it is what ``laneshift.cli`` does for the service processes.
+    ``threading._register_atexit`` runs before that join (there is no public hook that does)."""
+
+    def leave() -> None:
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+        os._exit(0)
+
+    threading._register_atexit(leave)  # type: ignore[attr-defined]
+
+
 def _write_pid(cfg: RunConfig, component: str) -> None:
     """``<run dir>/logs/<component>.pid``: which process to look at (or to kill, in the chaos suite)."""
     try:
@@ -120,6 +144,7 @@ class _Service:
         cfg, self.spec = _config(plain)
         _log_to_run_dir(cfg, self.component)
         _write_pid(cfg, self.component)
+        _never_hang_at_exit()
         pinned = pin_process(cfg.deploy.learner_core, learner=self.component == "learner")
         if pinned:
             print(f"{self.component}: {pinned}", flush=True)
@@ -240,6 +265,7 @@ class EnvWorkerActor:
         self.cfg, self.name = cfg, builder.workers[index]
         _log_to_run_dir(cfg, self.name)
         _write_pid(cfg, self.name)
+        _never_hang_at_exit()
         pinned = pin_process(cfg.deploy.learner_core, learner=False)
         if pinned:
             print(f"{self.name}: {pinned}", flush=True)
