@@ -203,6 +203,7 @@ def test_bad_value_in_a_file_names_it(tmp_path):
     ("learner.double", False, False),
     ("learner.hidden", "64,64", (64, 64)), ("learner.hidden", "128", (128,)), ("learner.hidden", " 8 , 4 ", (8, 4)),
     ("learner.hidden", [32, "16"], (32, 16)), ("learner.hidden", "64,64,", (64, 64)),
+    ("learner.hidden", "[512, 512]", (512, 512)), ("learner.hidden", "(32,16)", (32, 16)),
     ("replay.demo_paths", "a,b", ("a", "b")), ("replay.demo_paths", "", ()), ("replay.demo_paths", ["x"], ("x",)),
     ("env.scenario", "lka", "lka"), ("env.scenario", "laneshift/StraightLaneChange-v0", "laneshift/StraightLaneChange-v0"),
     ("transport.run_id", "exp-1_b", "exp-1_b"), ("transport.timeout_s", "2", 2.0),

@@ -42,8 +42,11 @@ def _coerce(where: str, typ: Any, value: Any) -> Any:
         return {str(k): _coerce(f"{where}.{k}", val_t, v) for k, v in value.items()}
     if origin is tuple:
         (item,) = {a for a in typing.get_args(typ) if a is not Ellipsis}
-        if isinstance(value, str):
-            value = [v for v in value.split(",") if v.strip()] if value.strip() else []
+        if isinstance(value, str):  # "512,512", or as a list is written in YAML or Python: "[512, 512]"
+            text = value.strip()
+            if len(text) >= 2 and (text[0], text[-1]) in (("[", "]"), ("(", ")")):
+                text = text[1:-1]
+            value = [v.strip() for v in text.split(",") if v.strip()]
         if not isinstance(value, (list, tuple)):
             raise ConfigError(f"{where}: must be a list, got {value!r}")
         return tuple(_coerce(where, item, v) for v in value)
