@@ -110,6 +110,11 @@ def test_a_tiny_study_trains_every_mode_answers_and_a_second_run_trains_nothing(
     table = (out / "table.md").read_text()
     assert "**The answer**" in table and "| none (none-anneal) | non-target |" in table
     assert (out / "curves_episodes.png").is_file() and (out / "episodes.json").is_file()
+    # The modes share one test set, so the drivers drove it once, for the study.
+    assert (out / "baselines.json").is_file()
+    assert not (out / "none" / "baselines.json").exists() and not (out / "rehearsal" / "baselines.json").exists()
+    first = capsys.readouterr().out
+    assert first.count("protocol: baselines: kept from") == 1
     capsys.readouterr()
     began = time.monotonic()
     assert cli.main(argv) == 0  # everything done: read back, nothing trained or driven again

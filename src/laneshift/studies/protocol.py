@@ -529,11 +529,15 @@ def run_protocol(args: argparse.Namespace) -> dict:
                 runs.append(run_seed(cfg, state, args, out_dir, road))
             bar.update()
     env_cfg = dataclasses.replace(next(iter(configs.values())).env, max_steps=args.eval_max_steps)
+    # Where the drivers' rows are kept: this study's dir, or one that several studies of the same
+    # test episodes share (`experiment paper`'s modes), so the drivers drive them once.
+    baselines_dir = Path(getattr(args, "baselines_dir", None) or out_dir)
+    baselines_dir.mkdir(parents=True, exist_ok=True)
     if env_cfg.is_allroads:
-        drivers, drivers_by_road = road_baselines(env_cfg, args.test_episodes, out_dir)
+        drivers, drivers_by_road = road_baselines(env_cfg, args.test_episodes, baselines_dir)
         results = summarise(args, road, runs, drivers, drivers_by_road)
     else:
-        drivers = drive_baselines(env_cfg, args.test_episodes, out_dir)
+        drivers = drive_baselines(env_cfg, args.test_episodes, baselines_dir)
         results = summarise(args, road, runs, drivers)
     results["command"] = command_line()
     write_json(out_dir / "results.json", results)
