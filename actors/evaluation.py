@@ -206,6 +206,10 @@ def checkpoint_env_settings(meta: Mapping[str, str]) -> dict[str, str]:
 def _shape_hint(trained: tuple[int, ...], given: tuple[int, ...]) -> str:
     if trained == (67,):
         return " (the 67-float vector layout is env.lane_features=false)"
+    if len(trained) == len(given) == 1 and trained[0] - given[0] == 6:
+        return " (6 floats more: a network trained with env.alongside_features=true; --set env.alongside_features=true)"
+    if len(trained) == len(given) == 1 and given[0] - trained[0] == 6:
+        return " (6 floats fewer: a network trained without env.alongside_features; drop that setting)"
     if len(trained) == len(given) == 1 and trained[0] == given[0] + len(ALLROADS):
         return " (an allroads network: --scenario allroads, with --set env.road=ROAD for one road)"
     if len(trained) != len(given):  # frames against a vector, or the other way round

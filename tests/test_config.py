@@ -383,3 +383,11 @@ def test_every_named_method_builds_a_valid_config():
     anneal = load_run_config(overrides=method_settings("dqfd-bc-anneal"))
     assert (anneal.learner.lr_final, anneal.learner.ema_decay, anneal.actor.epsilon_final) == (5e-5, 0.999, 0.01)
     assert anneal.learner.bc_loss_weight == 1.0 and anneal.learner.n_step == 10  # dqfd-bc underneath
+
+
+def test_alongside_features_need_the_lane_features_and_reach_the_env():
+    cfg = load_run_config(overrides={"env.alongside_features": "true", "env.scenario": "merge"})
+    assert cfg.env.env_kwargs()["alongside_features"] is True
+    assert "alongside_features" not in load_run_config().env.env_kwargs()  # off: the env's default layout
+    with pytest.raises(ConfigError, match="env.alongside_features: extends the lane features"):
+        load_run_config(overrides={"env.alongside_features": "true", "env.lane_features": "false"})

@@ -255,3 +255,34 @@ def test_lane_block_states_the_gaps_around_the_ego_vehicle() -> None:
     assert make_env("straight", lane_features=False).observation_space.shape == (vector_size(8, False),)
     with pytest.raises(ValueError, match="lane_features"):
         make_env("straight", lane_features="yes")
+
+
+def test_alongside_features_flag_a_car_beside_the_ego_vehicle_and_its_near_gap() -> None:
+    """With ``alongside_features`` each lane slot also says whether a car overlaps the ego vehicle
+    lengthwise and how near the nearest bumper is (10 m scale); the rest of the layout is unchanged."""
+    from laneshift.actors.envs.observations import EGO_FEATURES, NEAR_GAP_SCALE, lane_block
+
+    # The block itself: a car 2 m into the ego's length on the left, nobody near on the right.
+    block = lane_block([(30.0, 0.0, 40.0, 0.0), (-2.0, -0.5, 38.0, 0.0), (math.inf, 0.0, 7.0, 1.0)], alongside=True)
+    near = block[15:].reshape(3, 2)
+    assert near[0].tolist() == [0.0, 1.0]  # nearest 30 m: clipped at 1
+    assert near[1] == pytest.approx([1.0, -0.2])  # overlapping: alongside, gap -2 m / 10 m
+    assert near[2] == pytest.approx([0.0, 0.7])
+    assert not lane_block([None, None, None], alongside=True).any()
+    # In the env: the first 11 + 15 floats and the vehicle blocks are those of the plain layout.
+    plain, extended = make_env("merge"), make_env("merge", alongside_features=True)
+    assert extended.observation_space.shape == (vector_size(8, True, True),) == (plain.observation_space.shape[0] + 6,)
+    a, _ = plain.reset(seed=5)
+    b, _ = extended.reset(seed=5)
+    head = len(EGO_FEATURES) + 15
+    assert np.array_equal(a[:head], b[:head]) and np.array_equal(a[head:], b[head + 6:])
+    u = extended.unwrapped
+    for slot, lane in enumerate((u.ego.loc.lane, u.adjacent_lane(u.ego, -1), u.adjacent_lane(u.ego, +1))):
+        if lane is None:
+            assert not b[head + 2 * slot: head + 2 * slot + 2].any()
+            continue
+        front, _, rear, _ = u.lane_neighbours(u.ego, lane)
+        assert b[head + 2 * slot] == float(min(front, rear) < 0)
+        assert b[head + 2 * slot + 1] == pytest.approx(max(-1.0, min(1.0, min(front, rear) / NEAR_GAP_SCALE)), abs=1e-6)
+    with pytest.raises(ValueError, match="alongside_features"):
+        make_env("straight", lane_features=False, alongside_features=True)

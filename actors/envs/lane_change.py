@@ -95,6 +95,7 @@ class LaneChangeEnv(gym.Env):
         scaling: float = 2.0,
         vehicles_observed: int = 8,
         lane_features: bool = True,
+        alongside_features: bool = False,
         speed_step: float = 0.1,
         curvature_step: float = 0.01,
         ego_speed_spread: float = 2.0,
@@ -151,6 +152,11 @@ class LaneChangeEnv(gym.Env):
         if not isinstance(lane_features, (bool, np.bool_)):
             raise ValueError(f"lane_features must be True or False, got {lane_features!r}")
         self.lane_features = bool(lane_features)
+        if not isinstance(alongside_features, (bool, np.bool_)):
+            raise ValueError(f"alongside_features must be True or False, got {alongside_features!r}")
+        if alongside_features and not lane_features:
+            raise ValueError("alongside_features extends the lane features: it needs lane_features=True")
+        self.alongside_features = bool(alongside_features)
         self.speed_step = _float_arg("speed_step", speed_step, 0.0)
         self.curvature_step = _float_arg("curvature_step", curvature_step, 0.0, 2.0 / Vehicle.LENGTH)
         self.ego_speed_spread = _float_arg("ego_speed_spread", ego_speed_spread, 0.0)
@@ -174,7 +180,7 @@ class LaneChangeEnv(gym.Env):
         # ---- spaces ---------------------------------------------------------------------------
         self.actions = paper_actions(self.speed_step, self.curvature_step)
         self.action_space = spaces.Discrete(len(self.actions) if action_set == "paper" else len(META_ACTIONS))
-        self.vector_dim = vector_size(self.vehicles_observed, self.lane_features)
+        self.vector_dim = vector_size(self.vehicles_observed, self.lane_features, self.alongside_features)
         self.vector_space = spaces.Box(-OBS_LIMIT, OBS_LIMIT, shape=(self.vector_dim,), dtype=np.float32)
         if observation == "vector":
             self.observation_space = self.vector_space
@@ -278,7 +284,7 @@ class LaneChangeEnv(gym.Env):
                 continue
             front, v_front, rear, v_rear = self.lane_neighbours(v, lane)
             slots.append((front, v_front - forward, rear, v_rear - forward))
-        return lane_block(slots)
+        return lane_block(slots, self.alongside_features)
 
     def lane_gap(self, lane: int, s_from: float, s_to: float | np.ndarray) -> float | np.ndarray:
         """Signed arc-length difference s_to - s_from on ``lane`` (wrapped on rings); ``s_to`` may

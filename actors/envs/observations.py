@@ -1,7 +1,8 @@
 """The vector observation (default): a flat float32 vector computed with numpy, no pandas.
 
 Layout (``EGO_FEATURES``, then the lane block ``LANE_FEATURES`` for each of ``LANE_SLOTS`` when
-``lane_features`` is on (the default), then ``vehicles_observed`` blocks of ``OTHER_FEATURES``), all
+``lane_features`` is on (the default), then ``ALONGSIDE_FEATURES`` for each slot when
+``alongside_features`` is on, then ``vehicles_observed`` blocks of ``OTHER_FEATURES``), all
 in the observer's frame with "left" positive, as in the paper's action convention:
 
 ego block
@@ -18,6 +19,12 @@ lanes (current, left neighbour, right neighbour; a missing neighbour is all zero
     below, but there the network must work out from positions which car shares which lane; handed
     over per lane they make the scripted driver much easier to imitate (the ablation with
     ``lane_features=False`` is in docs/results-history.md, round 2).
+alongside (per lane slot, only with ``alongside_features``; after the lane block)
+    a vehicle on that lane overlaps the observer lengthwise (1/0: bumper gap ahead or behind below
+    0 m); the nearest bumper gap on that lane, ahead or behind, / 10 m, clipped to [-1, 1]. The lane
+    block has the same gaps at 50 m, where a car alongside (a gap of -2 m) reads -0.04 beside a free
+    lane's 2.0: a merge network trained without these steered into such cars from the on-ramp
+    (docs/RESULTS.md, merge).
 other vehicles (the K nearest within 60 m, nearest first; absent slots are all zero)
     presence; dx, dy / 50 m (dx forward, dy left); dvx, dvy / 10 m/s (relative velocity in the
     observer's frame); sin of the relative heading (+ = pointing left of the observer); lane
@@ -53,21 +60,26 @@ EGO_FEATURES = (
 OTHER_FEATURES = ("presence", "dx", "dy", "dvx", "dvy", "sin_dheading", "lane_delta")
 LANE_SLOTS = ("current", "left", "right")
 LANE_FEATURES = ("present", "front_gap", "front_dv", "rear_gap", "rear_dv")
+ALONGSIDE_FEATURES = ("alongside", "near_gap")
 GAP_SCALE, GAP_RANGE, GAP_SPEED_SCALE = 50.0, 100.0, 5.0
+NEAR_GAP_SCALE = 10.0
 OBS_LIMIT = 5.0
 SPEED_SCALE, DIST_SCALE, REL_SPEED_SCALE, EDGE_SCALE, END_SCALE = 20.0, 50.0, 10.0, 10.0, 100.0
 PERCEPTION_RANGE = 60.0
 
 
-def vector_size(vehicles_observed: int, lane_features: bool = True) -> int:
+def vector_size(vehicles_observed: int, lane_features: bool = True, alongside_features: bool = False) -> int:
     lanes = len(LANE_SLOTS) * len(LANE_FEATURES) if lane_features else 0
-    return len(EGO_FEATURES) + lanes + vehicles_observed * len(OTHER_FEATURES)
+    alongside = len(LANE_SLOTS) * len(ALONGSIDE_FEATURES) if alongside_features else 0
+    return len(EGO_FEATURES) + lanes + alongside + vehicles_observed * len(OTHER_FEATURES)
 
 
-def lane_block(neighbours: list[tuple[float, float, float, float] | None]) -> np.ndarray:
+def lane_block(neighbours: list[tuple[float, float, float, float] | None], alongside: bool = False) -> np.ndarray:
     """The lane features from ``(front_gap, front_dv, rear_gap, rear_dv)`` per slot ([m], [m/s];
-    ``None`` = no such lane; a gap of ``inf`` = nobody within range)."""
+    ``None`` = no such lane; a gap of ``inf`` = nobody within range), then with ``alongside`` the
+    alongside features of every slot (a missing lane: all zero)."""
     out = np.zeros((len(LANE_SLOTS), len(LANE_FEATURES)), np.float32)
+    near = np.zeros((len(LANE_SLOTS), len(ALONGSIDE_FEATURES)), np.float32)
     for i, nb in enumerate(neighbours):
         if nb is None:
             continue
@@ -75,7 +87,9 @@ def lane_block(neighbours: list[tuple[float, float, float, float] | None]) -> np
         out[i] = (1.0,
                   min(front, GAP_RANGE) / GAP_SCALE, dv_front / GAP_SPEED_SCALE if front <= GAP_RANGE else 0.0,
                   min(rear, GAP_RANGE) / GAP_SCALE, dv_rear / GAP_SPEED_SCALE if rear <= GAP_RANGE else 0.0)
-    return out.ravel()
+        nearest = min(front, rear)
+        near[i] = (float(nearest < 0.0), max(-1.0, min(1.0, nearest / NEAR_GAP_SCALE)))
+    return np.concatenate([out.ravel(), near.ravel()]) if alongside else out.ravel()
 
 
 def vector_observation(
@@ -98,7 +112,7 @@ def vector_observation(
 ) -> np.ndarray:
     """Observation of one vehicle; ``others_*`` must not contain the observer itself; ``lanes`` is
     its :func:`lane_block` (None: the layout without lane features)."""
-    out = np.zeros(vector_size(k, lanes is not None), dtype=np.float32)
+    out = np.zeros(len(EGO_FEATURES) + (0 if lanes is None else lanes.size) + k * len(OTHER_FEATURES), dtype=np.float32)
     span = max(1, lanes_count - 1)
     rel_heading = (heading - loc.heading[loc.lane] + math.pi) % (2 * math.pi) - math.pi
     # World heading/lateral/curvature grow to the right (y points down): negate for "left +".

@@ -67,6 +67,8 @@ class EnvConfig:
     policy_vehicles: int = 0  # other vehicles driven by a copy of the agent's policy
     # Per-lane gap features in the vector observation (False: the earlier 11 + 7 K layout).
     lane_features: bool = True
+    # Per lane slot: a car alongside (1/0) and the nearest bumper gap at 10 m scale (needs lane_features)
+    alongside_features: bool = False
     # allroads only: "" = each episode's road is drawn from its reset seed (seed % 4: straight, merge,
     # curve, roundabout); a road's name = every episode on that road (to test one road)
     road: str = ""
@@ -82,6 +84,8 @@ class EnvConfig:
                "must be empty (each episode draws its road) or straight, merge, curve or roundabout", self.road)
         _check(not self.road or self.is_allroads, "env.road", "pins the road of env.scenario=allroads only "
                f"(env.scenario is {self.scenario!r})", self.road)
+        _check(self.lane_features or not self.alongside_features, "env.alongside_features",
+               "extends the lane features: it needs env.lane_features=true", self.alongside_features)
         _check(not (self.is_allroads and self.observation == "grayscale"), "env.observation",
                "allroads needs the vector observation (the road's one-hot is appended to it; a frame has "
                "no place for it)", self.observation)
@@ -106,6 +110,8 @@ class EnvConfig:
             kw["policy_vehicles"] = self.policy_vehicles
         if not self.lane_features:
             kw["lane_features"] = False
+        if self.alongside_features:
+            kw["alongside_features"] = True
         if self.road:
             kw["road"] = self.road
         return kw
