@@ -47,6 +47,10 @@ METHODS: dict[str, dict[str, Any]] = {
     # (about the last 1,000 updates) and exploration ends at 1 %. Measured against dqfd-bc on the
     # same seeds: no difference three seeds can see (docs/RESULTS.md, the straight road's ablation).
     "dqfd-bc-anneal": {**_DQFD, **_ANNEALED_LEARNER, "learner.bc_loss_weight": 1.0},
+    # dqfd-bc-anneal that sees a car alongside: the vector observation's alongside features
+    # (env.alongside_features; 6 floats more). On merge, the plain observation's network steered
+    # from the on-ramp into cars beside it (docs/RESULTS.md, merge).
+    "dqfd-bc-alongside": {**_DQFD, **_ANNEALED_LEARNER, "learner.bc_loss_weight": 1.0, "env.alongside_features": True},
     # dqfd-bc-anneal for which a crash never pays: after a terminal step the target bootstraps -100,
     # the value of driving on in a non-target lane for ever (learner.terminal_value). Measured: on
     # the straight road 2 points higher on the test episodes and equal on the validation ones; on
