@@ -6,7 +6,7 @@ counted lost, weights versions monotonic, demo shard bytes identical, processes 
 ``tests/test_faults.py`` runs the same faults (with ``FaultInjector``) as fast tests.
 Room: the tools (the fault suite, beside the wiring it strikes). May import: the contract and ``deploy``.
 
-    laneshift chaos --faults worker,learner,router,replay,replay-after-checkpoint --json
+    laneshift chaos --faults worker,learner,router,replay,replay-after-checkpoint,replay-during-checkpoint --json
     laneshift chaos --faults disk-full,unwritable,stats-flood,launcher-sigterm,launcher-kill
 
 The network faults (a cut between two hosts, a slow and jittery link) need two network namespaces
@@ -88,6 +88,11 @@ def _recovery_s(run_dir: Path, before: tuple[int, int], since: float, deadline: 
     return round(time.monotonic() - since, 1) if _wait_until(moved, deadline, halt, 0.1) else None
 
 
+def checkpointing(run_dir: Path) -> Callable[[], bool]:
+    """True while the replay server is writing a checkpoint (its temp dir exists until the rename)."""
+    return lambda: (run_dir / "replay_checkpoint.tmp").is_dir()
+
+
 def _reached(run_dir: Path, steps: int) -> Callable[[], bool]:
     return lambda: logged_env_steps(run_dir)[0] >= steps
 
@@ -101,6 +106,11 @@ class FaultInjector(threading.Thread):
     component: str
     at_steps: int
     ready: Callable[[], bool] = lambda: True
+    # If set: once ready, the process is stopped (SIGSTOP) and this is checked while it cannot
+    # move; the signal is sent only if it holds (else SIGCONT, and again 50 ms later). For a state
+    # that lasts a moment, such as a checkpoint being written.
+    when_stopped: Callable[[], bool] | None = None
+    stops: int = 0  # SIGSTOPs sent for when_stopped
     sig: int = signal.SIGKILL
     timeout_s: float = 300.0
     killed_pid: int | None = None
@@ -119,7 +129,22 @@ class FaultInjector(threading.Thread):
             return
         before = logged_env_steps(self.run_dir)
         pid = int(pid_file.read_text())
+        if self.when_stopped is not None:
+            # Seen from outside first (no stop), then again with the process stopped, and the
+            # signal sent at once: batches sent while it is stopped are lost with it, so the stop
+            # lasts three system calls. (Once kill() returns every thread has the stop pending and
+            # runs no more user code; a system call in progress, a few microseconds, may end.)
+            while True:
+                if not _wait_until(self.when_stopped, deadline, self._halt, 0.001):
+                    return
+                os.kill(pid, signal.SIGSTOP)
+                self.stops += 1
+                if self.when_stopped():
+                    break
+                os.kill(pid, signal.SIGCONT)
         os.kill(pid, self.sig)
+        if self.when_stopped is not None and self.sig != signal.SIGKILL:
+            os.kill(pid, signal.SIGCONT)
         self.killed_pid, self.killed_at = pid, time.monotonic()
         self.recovery_s = _recovery_s(self.run_dir, before, self.killed_at, deadline, self._halt)
 
@@ -174,9 +199,15 @@ FAULTS: dict[str, dict] = {
     # A local run's router lives in the launcher (deploy.router_in auto): killing it is the launcher's
     # row. This row runs the router as its own actor, as on a cluster, and kills that.
     "router": {"component": "router", "overrides": {"deploy.router_in": "actor"}},
+    # The replay server: before any checkpoint (its write-ahead log alone brings the table back),
+    # once one exists, in the middle of one (checkpoints back to back: the kill lands while one is
+    # being copied), and without the log (what arrived since the last checkpoint is lost, counted).
     "replay": {"component": "replay-server", "overrides": {"replay.checkpoint_every_s": 0}},
     "replay-after-checkpoint": {"component": "replay-server", "needs": "replay_checkpoint",
                                 "overrides": {"replay.checkpoint_every_s": 0.5}},
+    "replay-during-checkpoint": {"component": "replay-server", "needs": "replay_checkpoint", "while": "checkpointing",
+                                 "overrides": {"replay.checkpoint_every_s": 0.02, "replay.capacity": 10_000}},
+    "replay-no-wal": {"component": "replay-server", "overrides": {"replay.checkpoint_every_s": 0, "replay.wal": "off"}},
     # The run dir on a 6 MiB tmpfs that fills up: checkpoints fail (counted, retried), training goes on.
     "disk-full": {"disk_mb": 6, "overrides": {"replay.checkpoint_every_s": 2, "replay.capacity": 60_000}},
     # The run dir read-only from an eighth to half of the budget (at most 10 s): over before the run ends (a bind mount remounted ro: EROFS even for root), then writable again.
@@ -220,7 +251,8 @@ def run_fault(name: str, work: Path, env_steps: int, demos: str | None) -> dict:
     elif spec.get("flood_actors"):
         inject = StatsFlood(run_dir, at_steps=env_steps // 4, actors=spec["flood_actors"])
     else:
-        inject = FaultInjector(run_dir, spec["component"], at_steps=env_steps // 4, ready=ready)
+        inject = FaultInjector(run_dir, spec["component"], at_steps=env_steps // 4, ready=ready,
+                               when_stopped=checkpointing(run_dir) if spec.get("while") == "checkpointing" else None)
     inject.start()
     from .local import train_local
 
@@ -229,7 +261,8 @@ def run_fault(name: str, work: Path, env_steps: int, demos: str | None) -> dict:
     rc = train_local(cfg, out=out)
     inject.stop()
     row: dict = {"fault": name, "rc": rc, "wall_s": round(time.monotonic() - started, 1),
-                 "injected": inject.struck, "recovery_s": inject.recovery_s}
+                 "injected": inject.struck, "recovery_s": inject.recovery_s,
+                 **({"stops": inject.stops} if getattr(inject, "when_stopped", None) else {})}
     try:
         summary = json.loads((run_dir / "summary.json").read_text())
         replay = json.loads((run_dir / "replay_stats.json").read_text())

@@ -49,9 +49,6 @@ MAX_ACTORS = 4096
 #: an actor evicted from this too is new when it returns, and its earlier batches read as lost
 #: (over-counted, never hidden).
 MAX_EVICTED = 4 * MAX_ACTORS
-#: Each actor's newest batches (seq, env_steps, items), kept so a checkpoint's restore can tell a
-#: batch its chunked copy caught only in part, and the env steps at the last batch it holds whole.
-BATCH_HISTORY = 64
 #: Actors listed in a stats reply: the reply stays the same size whatever the number of actors
 #: (at ~650 actors the full list outgrew the wire's 64 KiB JSON limit and broke every stats query).
 #: ``actors_total`` sums all of them; ``actor_page`` (control ``{"cmd": "actors"}``, HTTP
@@ -104,10 +101,8 @@ class ReplayCore:
         self.actor_index: dict[str, int] = {}  # actor -> its row index in the online table's actor column
         self._free_indices: collections.deque[int] = collections.deque()  # of evicted actors, reused
         self._last_seen: dict[str, float] = {}  # actor -> monotonic time of its newest batch
-        self._evicted: collections.OrderedDict[str, tuple[dict[str, int], collections.deque]] = \
-            collections.OrderedDict()
+        self._evicted: collections.OrderedDict[str, dict[str, int]] = collections.OrderedDict()
         self.evicted_total: collections.Counter[str] = collections.Counter()  # counters of evicted actors
-        self.batch_history: dict[str, collections.deque] = {}  # actor -> deque of (seq, env_steps, items)
         self.samples = 0  # rows sampled while the rate limiter applies
         self.sampled_rows = 0
         self.sampled_demo_rows = 0
@@ -118,6 +113,11 @@ class ReplayCore:
         # Who this server serves ({"run_id", "config_digest"}); written into checkpoints and checked on restore.
         self.identity: dict[str, str] = {}
         self.checkpoint_failures = 0  # checkpoint writes that failed (full disk, read-only dir)
+        # The write-ahead log (wal.WriteAheadLog, set by the server; None: none, as in unit tests):
+        # the service writes each batch to it as it arrives; the core writes phase changes, and
+        # its checkpoints cut it.
+        self.wal = None
+        self.wal_replayed: dict[str, int] = {}  # what the last start replayed from the log (wal.replay)
         self.http_url: str | None = None  # where this server's HTTP inspection API answers, if on
         # How rows are picked (selectors.py): uniform, or prioritized over [demo rows | online rows]
         # (demo leaves carry no mass in `none`, which has none, and from rehearsal's phase 2 on).
@@ -131,29 +131,39 @@ class ReplayCore:
 
     # ------------------------------------------------------------------ ingest
 
-    def ingest(self, payload: bytes | bytearray | memoryview, actor_key: str | None = None) -> str | None:
+    def ingest(self, payload: bytes | bytearray | memoryview, actor_key: str | None = None, *,
+               replaying: bool = False) -> str | None:
         """Validate and store one transitions message. Returns None, or the reason it was refused.
 
         Never raises on bad input: a malformed message is counted by reason and dropped, and it
-        is fully validated before anything is written, so no partial item can be stored.
+        is fully validated before anything is written, so no partial item can be stored. (The
+        server's write-ahead log has it on disk before this is called: ``wal.py``.)
+
+        ``replaying``: the message comes from the log at a restart (``wal.replay``): one whose seq
+        the actor's counters already hold is skipped (``"duplicate"``), and one refused is not
+        counted (it was when it first arrived): a replay never stores or counts a batch twice.
         """
+        reject = (lambda reason: reason) if replaying else self.reject
         try:
             # Views of the payload, not copies: the ring copies them below, before this returns.
             batch = decode_transitions(payload, self.schema, copy=False)
         except WireError as exc:
-            return self.reject(exc.reason)
+            return reject(exc.reason)
         except Exception:  # noqa: BLE001 - a decoder bug must not take the server down
-            return self.reject("decode_failed")
+            return reject("decode_failed")
         if actor_key is not None and actor_key != batch.actor:
-            return self.reject("actor_mismatch")
+            return reject("actor_mismatch")
         n, seq, env_steps = len(batch), batch.seq, batch.env_steps
         with self.lock:
             stats = self.actors.get(batch.actor)
             if stats is None:
                 stats = self._admit(batch.actor)
                 if stats is None:
-                    self.rejected["too_many_actors"] += 1
+                    if not replaying:
+                        self.rejected["too_many_actors"] += 1
                     return "too_many_actors"
+            elif replaying and seq <= stats["last_seq"]:
+                return "duplicate"
             now = time.monotonic()
             self._last_seen[batch.actor] = now
             last_seq = stats["last_seq"]
@@ -172,16 +182,15 @@ class ReplayCore:
                 stats["last_version"] = batch.weights_version
             if env_steps > stats["env_steps"]:
                 stats["env_steps"] = env_steps
-            self.batch_history[batch.actor].append((seq, env_steps, n))
             if self.cfg.pretrains and (self.phase == 1 or batch.phase == 1):
                 # Paper: in phase 1 the agent's own transitions are not stored.
                 self.dropped[f"{self.mode}_phase1"] += n
-                return None
-            tail = self.online.tail
-            keys = self.online.insert(batch, self.actor_index[batch.actor])
-            self.selector.stored(self.online, tail, keys)
-            stats["stored"] += n
-            self._rates.add("inserts", n, now)
+            else:
+                tail = self.online.tail
+                keys = self.online.insert(batch, self.actor_index[batch.actor])
+                self.selector.stored(self.online, tail, keys)
+                stats["stored"] += n
+                self._rates.add("inserts", n, now)
         return None
 
     def _admit(self, actor: str) -> dict[str, int] | None:
@@ -193,9 +202,8 @@ class ReplayCore:
             if oldest is None or time.monotonic() - self._last_seen[oldest] < self.cfg.actor_idle_evict_s:
                 return None
             self._evict(oldest)
-        remembered = self._evicted.pop(actor, None)
-        if remembered is not None:
-            stats, history = remembered
+        stats = self._evicted.pop(actor, None)
+        if stats is not None:
             for key, value in stats.items():  # its counters come back out of the evicted totals
                 if key in _SUMMED:
                     self.evicted_total[key] -= value
@@ -203,10 +211,8 @@ class ReplayCore:
         else:
             stats = {"batches": 0, "items": 0, "stored": 0, "last_seq": -1, "lost_batches": 0, "lost_items": 0,
                      "last_version": -1, "env_steps": 0}
-            history = collections.deque(maxlen=BATCH_HISTORY)
         self.actor_index[actor] = self._free_indices.popleft() if self._free_indices else len(self.actor_index)
         self.actors[actor] = stats
-        self.batch_history[actor] = history
         return stats
 
     def _evict(self, actor: str) -> None:
@@ -218,7 +224,7 @@ class ReplayCore:
         if isinstance(self.online, FrameRingTable):
             self.online.forget_actor(index)
         self._last_seen.pop(actor, None)
-        self._evicted[actor] = (stats, self.batch_history.pop(actor))
+        self._evicted[actor] = stats
         for key in _SUMMED:
             self.evicted_total[key] += int(stats.get(key, 0))
         self.evicted_total["count"] += 1
@@ -228,14 +234,13 @@ class ReplayCore:
 
     def evicted_stats(self) -> dict[str, dict[str, int]]:
         """The remembered counters of evicted actors (call under ``lock``): for checkpoints."""
-        return {name: dict(stats) for name, (stats, _) in self._evicted.items()}
+        return {name: dict(stats) for name, stats in self._evicted.items()}
 
     def restore_actors(self, actors: dict[str, dict[str, int]], index: dict[str, int],
-                       history: dict[str, list], evicted: dict[str, dict[str, int]],
-                       evicted_total: dict[str, int]) -> None:
+                       evicted: dict[str, dict[str, int]], evicted_total: dict[str, int]) -> None:
         """Take back the actors' state from a checkpoint (call under ``lock``, on a fresh core):
-        their counters, row indices (unused ones free for new actors), recent batches, the
-        evicted actors' counters. Every restored actor counts as seen now."""
+        their counters, row indices (unused ones free for new actors), the evicted actors'
+        counters. Every restored actor counts as seen now."""
         self.actors.update({k: {"lost_items": 0, **v} for k, v in actors.items()})
         self.actor_index.update(index)
         used = set(index.values())
@@ -243,11 +248,16 @@ class ReplayCore:
         now = time.monotonic()
         for name in self.actors:
             self._last_seen[name] = now
-            self.batch_history[name] = collections.deque((tuple(b) for b in history.get(name, ())),
-                                                         maxlen=BATCH_HISTORY)
         for name, stats in evicted.items():
-            self._evicted[name] = (stats, collections.deque(maxlen=BATCH_HISTORY))
+            self._evicted[name] = dict(stats)
         self.evicted_total.update({k: int(v) for k, v in evicted_total.items()})
+
+    def count_restored_as_sampled(self) -> None:
+        """The items restored (checkpoint, log) count as already sampled at the configured ratio:
+        counting them as fresh inserts with no samples froze the actors for 10-33 s after a
+        restart, waiting for the learner to "catch up" on data it had long learned from."""
+        with self.lock:
+            self.samples = int(max(0, self.online.inserted - self.cfg.min_size) * self.cfg.samples_per_insert)
 
     def reject(self, reason: str) -> str:
         """Count a message refused (here or by the service before it reached the core)."""
@@ -398,6 +408,8 @@ class ReplayCore:
                 raise ValueError("rehearsal phases only move forward")
             if phase == 2 and not self.cfg.retains_demos:
                 self.selector.demos_off()  # ordinary replay now
+            if phase != self.phase and self.wal is not None and self.wal.enabled:
+                self.wal.write_phase(phase)  # a restart replays it between the batches around it
             self.phase = phase
 
     def insert_allowed(self) -> bool:
@@ -430,7 +442,7 @@ class ReplayCore:
         with self.lock:
             stats = self.actors.get(actor)
             if stats is None and actor in self._evicted:
-                stats = self._evicted[actor][0]
+                stats = self._evicted[actor]
             if stats is None:
                 return {"env_steps": 0, "next_seq": 0, "known": 0}
             return {"env_steps": int(stats["env_steps"]), "next_seq": int(stats["last_seq"]) + 1, "known": 1}
@@ -505,6 +517,8 @@ class ReplayCore:
                 "actors": {k: dict(self.actors[k]) for k in shown},
                 "actors_total": self._actors_total(),
                 "rates": self._rates.rates(),
+                "wal": ({**(self.wal.state() if self.wal is not None else {"mode": "off"}),
+                         **({"replayed": dict(self.wal_replayed)} if self.wal_replayed else {})}),
                 "checkpoint": {**self.last_checkpoint,
                                "age_s": round(time.monotonic() - self.last_checkpoint["monotonic"], 1),
                                "failures": self.checkpoint_failures}

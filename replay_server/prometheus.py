@@ -39,7 +39,7 @@ def _family(kind: str, name: str, help_text: str, samples: list[tuple[dict[str, 
 def stats_metrics(stats: dict) -> list:
     """``full_stats()`` as metric families (the counters are the core's own, read at scrape time)."""
     t = stats["tables"]
-    rl, ckpt = stats.get("rate_limiter") or {}, stats.get("checkpoint") or {}
+    rl, ckpt, wal = stats.get("rate_limiter") or {}, stats.get("checkpoint") or {}, stats.get("wal") or {}
     actors = sorted(stats.get("actors", {}).items())
     in_buffer = t["online"].get("items_per_actor", {})
 
@@ -103,6 +103,12 @@ def stats_metrics(stats: dict) -> list:
         _family("gauge", "checkpoint_duration_seconds", "How long the last checkpoint took.", one(ckpt.get("seconds"))),
         _family("counter", "checkpoint_failures", "Checkpoint writes that failed (e.g. a full disk).",
                 one(ckpt.get("failures", 0))),
+        _family("gauge", "wal_bytes", "Bytes of write-ahead log a restart would replay (absent without a log).",
+                one(wal.get("bytes"))),
+        _family("counter", "wal_records", "Records written to the write-ahead log (absent without a log).",
+                one(wal.get("records_written"))),
+        _family("counter", "wal_failures", "Write-ahead log writes that failed (e.g. a full disk).",
+                one(wal.get("failures"))),
     ]
     return out
 

@@ -593,7 +593,8 @@ def test_stats_shape_is_json_and_complete():
     assert set(s) == {"mode", "phase", "http_url", "uptime_s", "actors_total", "tables", "demo_in_buffer",
                       "demo_share_buffer", "demo_share_recent_samples",
                       "sampled_rows", "sampled_demo_rows", "requests", "rejected", "dropped", "actors", "rates",
-                      "rate_limiter", "checkpoint", "sampler", "obs_shape", "obs_dtype", "n_actions"}
+                      "rate_limiter", "checkpoint", "wal", "sampler", "obs_shape", "obs_dtype", "n_actions"}
+    assert s["wal"] == {"mode": "off"}  # a bare core has no write-ahead log (the server gives it one)
     assert s["tables"]["online"] == {"size": 300, "capacity": 900, "inserted": 300, "bytes": core.online.nbytes}
     assert s["tables"]["demo"]["sha256"] == "d" * 64
     # stats travel as a JSON message: it must encode and decode unchanged
