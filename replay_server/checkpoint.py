@@ -27,8 +27,8 @@ and keeps every item whose frames are all there.
 
 Layout of ``<run dir>/replay_checkpoint/``: one ``.npy`` per column (``obs``, ``next_obs``,
 ``action``, ``reward``, ``terminated``, ``truncated``, ``steps``, ``actor``, ``version``, ``seq``,
-``key``) and ``meta.json`` (format version, schema, the cut, counters and per-actor stats at the
-cut, ``wal_from``).
+``key``) and ``meta.json`` (format version, schema, the cut, counters, per-actor stats and the
+seqs still fillable (``gaps``) at the cut, ``wal_from``).
 
 Room: replay_server (component). May import: the contract and laneshift.replay_server; never another
 component.
@@ -114,6 +114,8 @@ def write_checkpoint(core: "ReplayCore", directory: str | Path, wal: CutLog | No
                 "actors": {k: dict(v) for k, v in core.actors.items()}, "actor_index": dict(core.actor_index),
                 "evicted": core.evicted_stats(),
                 "evicted_total": dict(core.evicted_total),
+                # Seqs counted lost that a worker may still send (and, sent, are no longer lost).
+                "gaps": {k: g.to_json() for k, g in core.gaps.items()},
                 "mode": core.mode, "layout": "frames" if frames else "stacks",
                 # Which run wrote it: a server of another run (or another env) refuses to restore it.
                 "identity": dict(core.identity),
@@ -233,7 +235,8 @@ def restore_checkpoint(core: "ReplayCore", directory: str | Path) -> int:
         core.selector.stored(table, table.tail, np.arange(n, dtype=np.int64))  # prioritized: leaves for them
         # Every actor's counters as of the cut, so each resumes after its last batch before it: a
         # batch stored after the cut is replayed from the log, or is a seq gap (counted lost).
-        core.restore_actors(meta.get("actors", {}), index, meta.get("evicted", {}), meta.get("evicted_total", {}))
+        core.restore_actors(meta.get("actors", {}), index, meta.get("evicted", {}), meta.get("evicted_total", {}),
+                            meta.get("gaps", {}))
         if core.cfg.pretrains and meta.get("mode") == core.mode:
             core.phase = max(core.phase, int(meta.get("phase", core.phase)))
     core.count_restored_as_sampled()

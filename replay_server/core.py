@@ -28,6 +28,7 @@ component.
 from __future__ import annotations
 
 import collections
+import os
 import threading
 import time
 from typing import Any
@@ -118,6 +119,11 @@ class ReplayCore:
         # its checkpoints cut it.
         self.wal = None
         self.wal_replayed: dict[str, int] = {}  # what the last start replayed from the log (wal.replay)
+        # Seqs counted lost that a worker may still send (its resend window): taken, they are no
+        # longer lost. Per actor; only actors with such seqs have an entry.
+        self.gaps: dict[str, Gaps] = {}
+        # This process: a worker that sees it change sends again what it had not seen stored.
+        self.incarnation = os.urandom(6).hex()
         self.http_url: str | None = None  # where this server's HTTP inspection API answers, if on
         # How rows are picked (selectors.py): uniform, or prioritized over [demo rows | online rows]
         # (demo leaves carry no mass in `none`, which has none, and from rehearsal's phase 2 on).
@@ -162,18 +168,25 @@ class ReplayCore:
                     if not replaying:
                         self.rejected["too_many_actors"] += 1
                     return "too_many_actors"
-            elif replaying and seq <= stats["last_seq"]:
+            last_seq = stats["last_seq"]
+            if seq <= last_seq and not self._fill_gap(batch.actor, stats, seq, n):
+                # Held already (a worker's resend that crossed the original, a log record the
+                # checkpoint holds): nothing stored or counted twice. Not an error.
+                if not replaying:
+                    stats["duplicates"] = stats.get("duplicates", 0) + 1
                 return "duplicate"
             now = time.monotonic()
             self._last_seen[batch.actor] = now
-            last_seq = stats["last_seq"]
             if seq > last_seq + 1:
                 # A gap in seq: batches lost in transit, or stored by a server that died before its
                 # checkpoint. An actor first seen at seq k > 0 lost its first k batches here (a
                 # restarted server with no checkpoint), so last_seq starts at -1, not "unknown".
                 stats["lost_batches"] += seq - last_seq - 1
                 # Items in the gap: the actor's env steps between its last stored batch and this one.
-                stats["lost_items"] += max(0, env_steps - n - stats["env_steps"])
+                charged = max(0, env_steps - n - stats["env_steps"])
+                stats["lost_items"] += charged
+                # Its seqs stay fillable: a worker that still holds them sends them again.
+                self.gaps.setdefault(batch.actor, Gaps()).add(last_seq + 1, seq, charged)
             if seq > last_seq:
                 stats["last_seq"] = seq
             stats["batches"] += 1
@@ -193,6 +206,28 @@ class ReplayCore:
                 self._rates.add("inserts", n, now)
         return None
 
+    def _fill_gap(self, actor: str, stats: dict[str, int], seq: int, n: int) -> bool:
+        """A batch with ``seq`` below the actor's newest: if it is one counted lost (a gap still
+        tracked), it is no longer lost (called under the lock); else False (a duplicate)."""
+        gaps = self.gaps.get(actor)
+        if gaps is None:
+            return False
+        released = gaps.fill(seq, n)
+        if released is None:
+            return False
+        stats["lost_batches"] -= 1
+        stats["lost_items"] -= released
+        if not gaps.missing:
+            del self.gaps[actor]
+        return True
+
+    def missing(self, actor: str, from_seq: int = 0) -> list[int]:
+        """The seqs of ``actor`` counted lost that would still be taken (newest MISSING_KEPT at
+        most), from ``from_seq`` on."""
+        with self.lock:
+            gaps = self.gaps.get(actor)
+            return [s for s in gaps.missing if s >= from_seq] if gaps is not None else []
+
     def _admit(self, actor: str) -> dict[str, int] | None:
         """State for an actor not in the table (called under the lock): its remembered state if it
         was evicted, else fresh. At MAX_ACTORS the actor idle longest is evicted first, if idle for
@@ -210,7 +245,7 @@ class ReplayCore:
             self.evicted_total["count"] -= 1
         else:
             stats = {"batches": 0, "items": 0, "stored": 0, "last_seq": -1, "lost_batches": 0, "lost_items": 0,
-                     "last_version": -1, "env_steps": 0}
+                     "last_version": -1, "env_steps": 0, "duplicates": 0}
         self.actor_index[actor] = self._free_indices.popleft() if self._free_indices else len(self.actor_index)
         self.actors[actor] = stats
         return stats
@@ -224,6 +259,7 @@ class ReplayCore:
         if isinstance(self.online, FrameRingTable):
             self.online.forget_actor(index)
         self._last_seen.pop(actor, None)
+        self.gaps.pop(actor, None)  # an idle actor resends nothing: its gaps stay lost
         self._evicted[actor] = stats
         for key in _SUMMED:
             self.evicted_total[key] += int(stats.get(key, 0))
@@ -237,11 +273,13 @@ class ReplayCore:
         return {name: dict(stats) for name, stats in self._evicted.items()}
 
     def restore_actors(self, actors: dict[str, dict[str, int]], index: dict[str, int],
-                       evicted: dict[str, dict[str, int]], evicted_total: dict[str, int]) -> None:
+                       evicted: dict[str, dict[str, int]], evicted_total: dict[str, int],
+                       gaps: dict[str, Any] | None = None) -> None:
         """Take back the actors' state from a checkpoint (call under ``lock``, on a fresh core):
         their counters, row indices (unused ones free for new actors), the evicted actors'
-        counters. Every restored actor counts as seen now."""
-        self.actors.update({k: {"lost_items": 0, **v} for k, v in actors.items()})
+        counters, the gaps still fillable. Every restored actor counts as seen now."""
+        self.actors.update({k: {"lost_items": 0, "duplicates": 0, **v} for k, v in actors.items()})
+        self.gaps.update({k: Gaps.from_json(v) for k, v in (gaps or {}).items() if k in self.actors})
         self.actor_index.update(index)
         used = set(index.values())
         self._free_indices.extend(i for i in range(len(index)) if i not in used)
@@ -430,7 +468,10 @@ class ReplayCore:
             if cmd == "actors":  # a page of per-actor stats (stats lists only the first few)
                 return {"ok": True, **self.actor_page(body.get("offset", 0), body.get("limit", MAX_ACTOR_PAGE))}
             if cmd == "actor_state":  # where a restarted actor resumes: its stored steps and next seq
-                return {"ok": True, **self.actor_state(str(body.get("actor", "")))}
+                actor = str(body.get("actor", ""))
+                if "from_seq" in body:  # a worker's acknowledgement query: also what to send again
+                    return {"ok": True, **self.delivery_state(actor, int(body["from_seq"]))}
+                return {"ok": True, **self.actor_state(actor)}
         except (TypeError, ValueError) as exc:
             return {"ok": False, "error": str(exc)}
         return {"ok": False, "error": f"unknown command {cmd!r}"}
@@ -446,6 +487,15 @@ class ReplayCore:
             if stats is None:
                 return {"env_steps": 0, "next_seq": 0, "known": 0}
             return {"env_steps": int(stats["env_steps"]), "next_seq": int(stats["last_seq"]) + 1, "known": 1}
+
+    def delivery_state(self, actor: str, from_seq: int = 0) -> dict[str, Any]:
+        """What a worker needs to resend what this server lacks: ``actor_state`` plus ``missing``
+        (its seqs from ``from_seq`` on counted lost that would still be taken) and ``server`` (this
+        process's id: a new one means whatever was on its way to the old one may be gone)."""
+        state: dict[str, Any] = dict(self.actor_state(actor))
+        state["missing"] = self.missing(actor, from_seq)
+        state["server"] = self.incarnation
+        return state
 
     def actor_page(self, offset: int = 0, limit: int = MAX_ACTOR_PAGE) -> dict[str, Any]:
         """Per-actor stats, ``limit`` (at most MAX_ACTOR_PAGE) actors from ``offset`` in name order."""
@@ -528,7 +578,74 @@ class ReplayCore:
             }
 
 
-_SUMMED = ("batches", "items", "stored", "lost_batches", "lost_items", "env_steps")
+_SUMMED = ("batches", "items", "stored", "lost_batches", "lost_items", "env_steps", "duplicates")
+
+#: Seqs counted lost that stay fillable, per actor: the newest this many (a worker holds at most
+#: its MAX_IN_FLIGHT unacknowledged batches, 64, so older ones can never come).
+MISSING_KEPT = 256
+
+
+class Gaps:
+    """One actor's seqs counted lost that may still arrive, with the items each gap was charged
+    (from the actor's env steps). A batch that fills a seq takes its items off its gap's charge;
+    the gap's last seq filled takes the rest, so a gap filled whole counts exactly 0 lost.
+
+        >>> g = Gaps(); g.add(3, 6, 30)  # seqs 3, 4, 5: 30 items counted lost
+        >>> g.fill(4, 10), g.fill(4, 10), g.missing
+        (10, None, [3, 5])
+        >>> g.fill(3, 10), g.fill(5, 8)
+        (10, 10)
+    """
+
+    def __init__(self) -> None:
+        self._seq_gap: dict[int, int] = {}  # missing seq -> its gap's first seq, ascending
+        self._gap: dict[int, list[int]] = {}  # gap's first seq -> [items still charged, seqs still tracked]
+
+    @property
+    def missing(self) -> list[int]:
+        return list(self._seq_gap)
+
+    def add(self, first: int, end: int, charged: int) -> None:
+        """Seqs ``first .. end - 1`` were skipped, ``charged`` items counted lost for them."""
+        tracked = range(max(first, end - MISSING_KEPT), end)
+        if not tracked:
+            return
+        self._gap[first] = [charged, len(tracked)]
+        for s in tracked:
+            self._seq_gap[s] = first
+        while len(self._seq_gap) > MISSING_KEPT:  # the oldest stay lost for good
+            s = next(iter(self._seq_gap))
+            self._forget(s, self._seq_gap.pop(s))
+
+    def fill(self, seq: int, n: int) -> int | None:
+        """``seq`` arrived with ``n`` items: the items no longer lost, or None if it is not missing."""
+        first = self._seq_gap.pop(seq, None)
+        if first is None:
+            return None
+        gap = self._gap[first]
+        gap[1] -= 1
+        released = gap[0] if gap[1] == 0 else min(n, gap[0])
+        gap[0] -= released
+        if gap[1] == 0:
+            del self._gap[first]
+        return released
+
+    def _forget(self, seq: int, first: int) -> None:
+        gap = self._gap[first]
+        gap[1] -= 1
+        if gap[1] == 0:
+            del self._gap[first]
+
+    def to_json(self) -> dict[str, Any]:
+        return {"missing": [[s, f] for s, f in self._seq_gap.items()],
+                "gaps": [[f, c, t] for f, (c, t) in self._gap.items()]}
+
+    @classmethod
+    def from_json(cls, body: dict[str, Any]) -> "Gaps":
+        g = cls()
+        g._gap = {int(f): [int(c), int(t)] for f, c, t in body.get("gaps", [])}
+        g._seq_gap = {int(s): int(f) for s, f in sorted(body.get("missing", [])) if int(f) in g._gap}
+        return g
 
 
 def _take(column: Any, rows: np.ndarray, out: np.ndarray) -> None:

@@ -84,6 +84,8 @@ def stats_metrics(stats: dict) -> list:
             ("lost_batches", "counter", "actor_lost_batches", "Messages missing from the sequence, by actor."),
             ("lost_items", "counter", "actor_lost_items",
              "Items in the missing messages (from the actor's env-step count), by actor."),
+            ("duplicates", "counter", "actor_duplicates",
+             "Messages received again that the server held already (ignored), by actor."),
             ("env_steps", "counter", "actor_env_steps", "An actor's cumulative env steps."),
             ("last_version", "gauge", "actor_weights_version", "Newest weights version an actor acted with.")):
         out.append(_family(kind, name, help_text, [({"actor": a}, s.get(field)) for a, s in actors]))
