@@ -62,7 +62,8 @@ def tmsg(start: int, rows: int = B) -> tuple[bytes, str]:
 
 def fill(core: ReplayCore, total: int) -> None:
     for _ in range(0, total, B):
-        msg, actor = tmsg(core.online.inserted)
+        # Numbered on from the items received (stored or, in phase 1, dropped): each batch a new seq.
+        msg, actor = tmsg(core.stats()["actors_total"]["items"])
         assert core.ingest(msg, actor) is None
 
 
