@@ -208,6 +208,10 @@ FAULTS: dict[str, dict] = {
     "replay-during-checkpoint": {"component": "replay-server", "needs": "replay_checkpoint", "while": "checkpointing",
                                  "overrides": {"replay.checkpoint_every_s": 0.02, "replay.capacity": 10_000}},
     "replay-no-wal": {"component": "replay-server", "overrides": {"replay.checkpoint_every_s": 0, "replay.wal": "off"}},
+    # The replay server at other points of the budget (a checkpoint every 0.5 s): near the end the
+    # workers spend theirs while it is down, and wait until the restarted one holds all they sent.
+    **{f"replay-at-{pct}": {"component": "replay-server", "at": pct / 100,
+                            "overrides": {"replay.checkpoint_every_s": 0.5}} for pct in (10, 50, 90)},
     # The run dir on a 6 MiB tmpfs that fills up: checkpoints fail (counted, retried), training goes on.
     "disk-full": {"disk_mb": 6, "overrides": {"replay.checkpoint_every_s": 2, "replay.capacity": 60_000}},
     # The run dir read-only from an eighth to half of the budget (at most 10 s): over before the run ends (a bind mount remounted ro: EROFS even for root), then writable again.
@@ -251,7 +255,7 @@ def run_fault(name: str, work: Path, env_steps: int, demos: str | None) -> dict:
     elif spec.get("flood_actors"):
         inject = StatsFlood(run_dir, at_steps=env_steps // 4, actors=spec["flood_actors"])
     else:
-        inject = FaultInjector(run_dir, spec["component"], at_steps=env_steps // 4, ready=ready,
+        inject = FaultInjector(run_dir, spec["component"], at_steps=int(env_steps * spec.get("at", 0.25)), ready=ready,
                                when_stopped=checkpointing(run_dir) if spec.get("while") == "checkpointing" else None)
     inject.start()
     from .local import train_local
