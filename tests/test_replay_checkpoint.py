@@ -116,12 +116,13 @@ def test_checkpoint_while_inserting_has_no_torn_items(tmp_path, monkeypatch):
 
 
 @pytest.mark.parametrize("wal", ["write", "off"])
-def test_inserts_that_overwrite_the_whole_ring_during_the_copy(tmp_path, monkeypatch, wal):
-    """The case the test above once met by chance: between two chunks of the copy the ring is
-    overwritten whole. The checkpoint then holds only the first chunk's items (every other one of
-    its cut was evicted before the copy reached it; by chance, that can be all), and that loses
-    nothing: with the log the restart is the dead server
-    exactly; without it each later batch is a seq gap, every item stored or counted lost."""
+@pytest.mark.parametrize("chunks_first", [0, 1])
+def test_inserts_that_overwrite_the_whole_ring_during_the_copy(tmp_path, monkeypatch, wal, chunks_first):
+    """The case the test above once met by chance: the ring is overwritten whole while the copy
+    runs (before its first chunk: the checkpoint holds 0 items, what that test saw; or after it:
+    the first chunk's 10). Every other item of its cut was evicted before the copy reached it, and
+    that loses nothing: with the log the restart is the dead server exactly; without it each later
+    batch is a seq gap, every item stored or counted lost."""
     import laneshift.replay_server.checkpoint as ckpt
 
     core = ReplayCore(ReplayConfig(capacity=100, min_size=1), SCHEMA)
@@ -129,17 +130,19 @@ def test_inserts_that_overwrite_the_whole_ring_during_the_copy(tmp_path, monkeyp
     for seq in range(10):  # the ring full: rows 0-99
         assert receive(core, batch(seq)) is None
     monkeypatch.setattr(ckpt, "CHUNK_BYTES", 10 * _row_bytes(core))  # 10 rows a chunk
-    # Lock holds: the cut, then chunks of rows 0-9, 10-19, ...; before the 2nd chunk, 10 batches.
-    core.lock = _CopyHook(core.lock, after=2, action=lambda: [receive(core, batch(s)) for s in range(10, 20)])
+    # Lock holds: the cut, then chunks of rows 0-9, 10-19, ...; 10 batches before chunk 1 or 2.
+    core.lock = _CopyHook(core.lock, after=1 + chunks_first,
+                          action=lambda: [receive(core, batch(s)) for s in range(10, 20)])
     write_checkpoint(core, tmp_path / "ckpt", core.wal)
     core.lock = core.lock.lock
+    kept = 10 * chunks_first  # items 0-9 if rows 0-9 were copied before the overwrite
     meta = read_meta(tmp_path / "ckpt")
-    assert meta["cut"] == 100 and meta["items"] == 10  # rows 0-9 copied before the overwrite: items 0-9
+    assert meta["cut"] == 100 and meta["items"] == kept
     fresh, done = _restart(tmp_path)
     if wal == "write":
         assert done["batches"] == 10 and _content(fresh) == _content(core) and fresh.actors == core.actors
     else:
-        assert (assert_items_whole(fresh) == np.arange(10)).all()
+        assert (assert_items_whole(fresh) == np.arange(kept)).all()
         assert fresh.actor_state("w0") == {"env_steps": 100, "next_seq": 10, "known": 1}
     assert fresh.ingest(batch(20)) is None  # the worker goes on
     w0 = fresh.actors["w0"]
