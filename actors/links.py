@@ -1,4 +1,5 @@
-"""The worker's seams over zenoh: transitions out (BLOCK), newest weights in, control in.
+"""The worker's seams over zenoh: transitions out (BLOCK, held until the replay server has
+them, sent again if it lacks them), newest weights in, control in.
 
     >>> links = ZenohActorLinks(session, "run", "w0")  # doctest: +SKIP
     >>> worker.run(links, env_steps=10_000)  # doctest: +SKIP
@@ -9,6 +10,7 @@ another component.
 
 from __future__ import annotations
 
+import collections
 import time
 
 import zenoh
@@ -17,9 +19,20 @@ from laneshift import transport, wire
 
 
 #: Batches a worker may have sent that the replay server has not stored yet, and how often
-#: (in batches) it asks: a bound on what a cut link can lose or queue, at one query per 16 batches.
+#: (in batches) it asks: a bound on what a cut link can queue, at one query per 16 batches. The
+#: worker keeps those batches' bytes (at most this many: 64 x a batch, e.g. 64 x 1.8 MB for
+#: 32 grayscale 84x84x4 items, 64 x 4 KB for the LKA plant) until the server has them, and sends
+#: again whatever the server's answer shows it lacks, so a replay server killed with -9 (its log
+#: keeps what it took) or a link reset loses nothing.
 MAX_IN_FLIGHT = 64
 ACK_EVERY = 16
+#: No progress on the batches after the server's newest for this long (doubling while it lasts,
+#: up to RESEND_MAX_S): sent again, as they may have died on the way (nothing after them shows a gap).
+RESEND_AFTER_S = 2.0
+RESEND_MAX_S = 30.0
+#: How long a worker whose budget is spent waits for the server to hold all it sent (a replay
+#: server that restarts takes a few seconds; it is given much more).
+FLUSH_TIMEOUT_S = 120.0
 
 
 class ZenohActorLinks:
@@ -37,8 +50,13 @@ class ZenohActorLinks:
         self._insert_ok = True
         self._last_query = 0.0
         self.name = name
-        self._sent = 0  # batches sent by this session
-        self._base_seq: int | None = None  # the server's next_seq for us before our first batch
+        self._sent = 0  # batches sent by this session (resends not counted)
+        # Sent, not yet known stored: seq -> the message's bytes, oldest first (at most MAX_IN_FLIGHT).
+        self._unacked: collections.OrderedDict[int, bytes] = collections.OrderedDict()
+        self._next_seq = 0  # the seq after the last one sent
+        self._server: str | None = None  # the replay server process that answered last
+        self._progress = (-1, time.monotonic(), RESEND_AFTER_S)  # (its next_seq, since when, resend after)
+        self.resent = 0  # batches sent again (counted; the server ignores those it has)
         # A wait on the network says so in the worker's log: one line after a few seconds, then at
         # most one every 30 s, and one when it is over (transport.WaitLines).
         router = transport.router_of(session)
@@ -53,21 +71,30 @@ class ZenohActorLinks:
 
     def send_transitions(self, batch: wire.TransitionBatch) -> None:
         payload = wire.encode_transitions(batch)
+        if self._sent % ACK_EVERY == 0 or len(self._unacked) >= MAX_IN_FLIGHT:
+            self._bound_in_flight()
+        self._put(payload)
+        self._unacked[batch.seq] = payload
+        self._next_seq = batch.seq + 1
+        self._sent += 1
+
+    def _put(self, payload: bytes) -> None:
         if not self._transitions.matching_status.matching:
             # Nobody subscribed as far as this session knows (the first batch, or the router or
             # replay server is coming back): a put now would go nowhere, so wait for the match
-            # (bounded: after timeout_s it is sent anyway and the server counts the gap as lost).
+            # (bounded: after timeout_s it is sent anyway; it stays held and is sent again).
             transport.wait_matching(self._transitions, self.timeout_s)
-        if self._sent % ACK_EVERY == 0:
-            self._bound_in_flight()
         self._transitions.put(payload)
-        self._sent += 1
 
     def stored_state(self) -> dict[str, int] | None:
         """What the replay server stored of this worker: ``{"env_steps", "next_seq"}`` (zeros for
         a worker it never saw), or None when it did not answer. A restarted worker resumes there."""
-        reply = transport.query(self.session, wire.replay_control_key(self.replay_ns),
-                                wire.encode_json({"cmd": "actor_state", "actor": self.name}), self.timeout_s)
+        body = self._ask({"cmd": "actor_state", "actor": self.name})
+        return {"env_steps": int(body["env_steps"]), "next_seq": int(body["next_seq"])} if body else None
+
+    def _ask(self, command: dict) -> dict | None:
+        reply = transport.query(self.session, wire.replay_control_key(self.replay_ns), wire.encode_json(command),
+                                self.timeout_s)
         if reply is None:
             self._replay_wait.missed()
         else:
@@ -76,26 +103,62 @@ class ZenohActorLinks:
             body = wire.decode_json(reply) if reply is not None else {}
         except wire.WireError:
             return None
-        return {"env_steps": int(body["env_steps"]), "next_seq": int(body["next_seq"])} if body.get("ok") else None
+        return body if body.get("ok") else None
 
-    def _stored_next_seq(self) -> int | None:
-        state = self.stored_state()
-        return state["next_seq"] if state is not None else None
+    def acknowledge(self) -> bool | None:
+        """Ask the replay server what it holds of this worker's batches; forget those it has; send
+        again those it lacks: the seqs it counted lost (a link reset, a restart whose log ended
+        before them), and, when nothing after them shows a gap (the server restarted, or no
+        progress for RESEND_AFTER_S), every batch after its newest. True when nothing is left
+        unacknowledged, None when the server did not answer."""
+        unacked = self._unacked
+        body = self._ask({"cmd": "actor_state", "actor": self.name,
+                          "from_seq": next(iter(unacked)) if unacked else self._next_seq})
+        if body is None:
+            return None
+        next_seq, missing = int(body["next_seq"]), {int(s) for s in body.get("missing", ())}
+        for seq in [s for s in unacked if s < next_seq and s not in missing]:
+            del unacked[seq]
+        again = sorted(s for s in missing if s in unacked)
+        tail = [s for s in unacked if s >= next_seq]
+        server, now = body.get("server"), time.monotonic()
+        seen, since, after = self._progress
+        if next_seq != seen or not tail:
+            self._progress = (next_seq, now, RESEND_AFTER_S)
+        elif now - since >= after:  # stalled: the tail may have died on the way
+            again += tail
+            self._progress = (next_seq, now, min(2 * after, RESEND_MAX_S))
+        if server != self._server:
+            if self._server is not None:  # a new server process: what was on its way to the old one is gone
+                again += tail
+            self._server = server
+        for seq in sorted(set(again)):
+            self._put(unacked[seq])
+            self.resent += 1
+        return not unacked
 
     def _bound_in_flight(self) -> None:
-        """Wait while more than MAX_IN_FLIGHT of this worker's batches are sent but not stored.
+        """Wait while MAX_IN_FLIGHT of this worker's batches are sent but not stored.
 
         The rate limiter only sees what arrived; on a cut link a worker ran 10,000 steps ahead of
-        what was stored, and lost them all when its budget ended during the cut. A query every
-        ACK_EVERY batches keeps that loss (and the memory queued behind the link) bounded.
+        what was stored. A query every ACK_EVERY batches keeps what it holds (and the memory
+        queued behind the link) bounded, and sends again what the server lacks.
         """
-        stored = self._stored_next_seq()
-        if self._base_seq is None:
-            self._base_seq = stored if stored is not None else 0
-            return
-        while stored is not None and self._base_seq + self._sent - stored > MAX_IN_FLIGHT and not self.stop_requested():
+        self.acknowledge()
+        while len(self._unacked) >= MAX_IN_FLIGHT and not self.stop_requested():
             time.sleep(0.05)
-            stored = self._stored_next_seq()
+            self.acknowledge()
+
+    def flush(self, timeout_s: float = FLUSH_TIMEOUT_S) -> bool:
+        """At the end of the budget: wait (at most ``timeout_s``, or until a stop) until the replay
+        server holds every batch this worker sent, sending again what it lacks. False if some were
+        still missing then (the launcher counts them lost)."""
+        deadline = time.monotonic() + timeout_s
+        while not self.acknowledge():
+            if time.monotonic() >= deadline or self.stop_requested():
+                return False
+            time.sleep(0.1)
+        return True
 
     def send_episode(self, record: wire.EpisodeRecord) -> None:
         self._episodes.put(wire.encode_episode(record))

@@ -4,7 +4,9 @@ The worker only knows three tiny seams (Acme style), so the same class runs insi
 over zenoh (``ZenohActorLinks``) and in-process in unit tests (``laneshift.deploy.inprocess``);
 the links own the encoding:
 
-- ``ExperienceSink``: ``send_transitions(TransitionBatch)`` and ``send_episode(EpisodeRecord)``;
+- ``ExperienceSink``: ``send_transitions(TransitionBatch)``, ``send_episode(EpisodeRecord)`` and
+  ``flush()`` (at the end of the budget: wait, bounded, until the replay server holds every batch
+  sent; False if it does not);
 - ``WeightsSource`` (Acme's VariableSource): ``latest_weights() -> bytes | None`` (newest unseen
   version, never blocks) and ``wait_weights(timeout) -> bytes | None``. They stay the wire's
   safetensors bytes because the worker itself verifies them and counts the ones it refuses;
@@ -44,6 +46,7 @@ class ExperienceSink(Protocol):
 
     def send_transitions(self, batch: wire.TransitionBatch) -> None: ...
     def send_episode(self, record: wire.EpisodeRecord) -> None: ...
+    def flush(self) -> bool: ...
 
 
 class WeightsSource(Protocol):
@@ -235,6 +238,8 @@ class EnvWorker:
                     break
             else:
                 self._apply(links.latest_weights())
+        if not links.stop_requested():
+            links.flush()  # what the server lacks is sent again; what it never gets is counted lost
         return self._summary(steps, episodes, seq, versions, started, rate_limited_s)
 
     def _summary(self, steps: int, episodes: int, batches: int, versions: list[int], started: float,

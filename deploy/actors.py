@@ -285,7 +285,8 @@ class EnvWorkerActor:
         resume = Resume(env_steps=min(state["env_steps"], env_steps), next_seq=state["next_seq"], restarts=restarts)
         summary = self.worker.run(self.links, env_steps, resume).as_dict()
         return {**summary, "node": self.where["node_id"], "node_ip": self.where["node_ip"], "restarts": restarts,
-                "resumed_at": resume.env_steps}
+                "resumed_at": resume.env_steps,
+                "resent": self.links.resent}  # batches sent again that the replay server lacked (or may have)
 
     def _resume_point(self) -> dict[str, int]:
         """Ask the replay server what it stored of this worker (a first start gets zeros)."""

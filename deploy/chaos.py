@@ -6,11 +6,12 @@ counted lost, weights versions monotonic, demo shard bytes identical, processes 
 ``tests/test_faults.py`` runs the same faults (with ``FaultInjector``) as fast tests.
 Room: the tools (the fault suite, beside the wiring it strikes). May import: the contract and ``deploy``.
 
-    laneshift chaos --faults worker,learner,router,replay,replay-after-checkpoint --json
+    laneshift chaos --faults worker,learner,router,replay,replay-after-checkpoint,replay-during-checkpoint --json
     laneshift chaos --faults disk-full,unwritable,stats-flood,launcher-sigterm,launcher-kill
 
-The network faults (a cut between two hosts, a slow and jittery link) need two network namespaces
-and run as ``pytest -m chaos tests/test_network_faults.py``.
+The link rows (``link-reset``, ``link-cut``, ``slow-link``) put a TCP proxy (``linkproxy``) between
+the workers and the router; a cut between two hosts (two network namespaces, root) runs as
+``pytest -m chaos tests/test_network_faults.py``.
 
 Processes are found through ``<run dir>/logs/<component>.pid`` (each actor writes its own).
 """
@@ -30,7 +31,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 from laneshift.config import load_run_config
 
@@ -88,6 +89,11 @@ def _recovery_s(run_dir: Path, before: tuple[int, int], since: float, deadline: 
     return round(time.monotonic() - since, 1) if _wait_until(moved, deadline, halt, 0.1) else None
 
 
+def checkpointing(run_dir: Path) -> Callable[[], bool]:
+    """True while the replay server is writing a checkpoint (its temp dir exists until the rename)."""
+    return lambda: (run_dir / "replay_checkpoint.tmp").is_dir()
+
+
 def _reached(run_dir: Path, steps: int) -> Callable[[], bool]:
     return lambda: logged_env_steps(run_dir)[0] >= steps
 
@@ -101,6 +107,11 @@ class FaultInjector(threading.Thread):
     component: str
     at_steps: int
     ready: Callable[[], bool] = lambda: True
+    # If set: once ready, the process is stopped (SIGSTOP) and this is checked while it cannot
+    # move; the signal is sent only if it holds (else SIGCONT, and again 50 ms later). For a state
+    # that lasts a moment, such as a checkpoint being written.
+    when_stopped: Callable[[], bool] | None = None
+    stops: int = 0  # SIGSTOPs sent for when_stopped
     sig: int = signal.SIGKILL
     timeout_s: float = 300.0
     killed_pid: int | None = None
@@ -119,7 +130,22 @@ class FaultInjector(threading.Thread):
             return
         before = logged_env_steps(self.run_dir)
         pid = int(pid_file.read_text())
+        if self.when_stopped is not None:
+            # Seen from outside first (no stop), then again with the process stopped, and the
+            # signal sent at once: batches sent while it is stopped are lost with it, so the stop
+            # lasts three system calls. (Once kill() returns every thread has the stop pending and
+            # runs no more user code; a system call in progress, a few microseconds, may end.)
+            while True:
+                if not _wait_until(self.when_stopped, deadline, self._halt, 0.001):
+                    return
+                os.kill(pid, signal.SIGSTOP)
+                self.stops += 1
+                if self.when_stopped():
+                    break
+                os.kill(pid, signal.SIGCONT)
         os.kill(pid, self.sig)
+        if self.when_stopped is not None and self.sig != signal.SIGKILL:
+            os.kill(pid, signal.SIGCONT)
         self.killed_pid, self.killed_at = pid, time.monotonic()
         self.recovery_s = _recovery_s(self.run_dir, before, self.killed_at, deadline, self._halt)
 
@@ -174,15 +200,32 @@ FAULTS: dict[str, dict] = {
     # A local run's router lives in the launcher (deploy.router_in auto): killing it is the launcher's
     # row. This row runs the router as its own actor, as on a cluster, and kills that.
     "router": {"component": "router", "overrides": {"deploy.router_in": "actor"}},
+    # The replay server: before any checkpoint (its write-ahead log alone brings the table back),
+    # once one exists, in the middle of one (checkpoints back to back: the kill lands while one is
+    # being copied), and without the log (what arrived since the last checkpoint is lost, counted).
     "replay": {"component": "replay-server", "overrides": {"replay.checkpoint_every_s": 0}},
     "replay-after-checkpoint": {"component": "replay-server", "needs": "replay_checkpoint",
                                 "overrides": {"replay.checkpoint_every_s": 0.5}},
+    "replay-during-checkpoint": {"component": "replay-server", "needs": "replay_checkpoint", "while": "checkpointing",
+                                 "overrides": {"replay.checkpoint_every_s": 0.02, "replay.capacity": 10_000}},
+    "replay-no-wal": {"component": "replay-server", "overrides": {"replay.checkpoint_every_s": 0, "replay.wal": "off"}},
+    # The replay server at other points of the budget (a checkpoint every 0.5 s): near the end the
+    # workers spend theirs while it is down, and wait until the restarted one holds all they sent.
+    **{f"replay-at-{pct}": {"component": "replay-server", "at": pct / 100,
+                            "overrides": {"replay.checkpoint_every_s": 0.5}} for pct in (10, 50, 90)},
     # The run dir on a 6 MiB tmpfs that fills up: checkpoints fail (counted, retried), training goes on.
     "disk-full": {"disk_mb": 6, "overrides": {"replay.checkpoint_every_s": 2, "replay.capacity": 60_000}},
     # The run dir read-only from an eighth to half of the budget (at most 10 s): over before the run ends (a bind mount remounted ro: EROFS even for root), then writable again.
     "unwritable": {"read_only_s": 10.0, "overrides": {"replay.checkpoint_every_s": 1}},
     # 5,000 actor names, one one-row batch each, from a foreign client, while stats are queried.
     "stats-flood": {"flood_actors": 5000},
+    # The link between the workers and the router (a proxy in front of it, deploy.worker_router):
+    # every connection reset at a quarter, half and three quarters of the budget; a 10 s cut (the
+    # proxy holds every byte, no connection closes) at a quarter; a slow, jittery link (50 +- 20 ms
+    # per chunk each way) for the whole run, reset at half. The workers' resend must lose nothing.
+    "link-reset": {"link": {"resets_at": (0.25, 0.5, 0.75)}},
+    "link-cut": {"link": {"hold_at": 0.25, "hold_s": 10.0}},
+    "slow-link": {"link": {"latency_s": 0.05, "jitter_s": 0.02, "resets_at": (0.5,)}},
     # The launcher itself: SIGTERM (`ray job stop`, systemd, Kubernetes) or kill -9, then
     # `laneshift train --resume RUN_DIR`, which must spend exactly the rest of the budget.
     "launcher-sigterm": {"launcher_signal": signal.SIGTERM, "overrides": {"replay.checkpoint_every_s": 2}},
@@ -199,6 +242,16 @@ def run_fault(name: str, work: Path, env_steps: int, demos: str | None) -> dict:
     if spec.get("launcher_signal"):
         return _launcher_fault(name, spec, run_dir, env_steps)
     overrides = {**FAST, "train.run_dir": str(run_dir), "train.env_steps": env_steps, **spec.get("overrides", {})}
+    proxy = None
+    if spec.get("link"):  # the workers reach the router through a proxy that strikes the link
+        from laneshift.transport import free_tcp_port
+
+        from .linkproxy import LinkProxy
+
+        router_port = free_tcp_port()
+        proxy = LinkProxy(router_port, latency_s=spec["link"].get("latency_s", 0.0),
+                          jitter_s=spec["link"].get("jitter_s", 0.0), reset_every_s=0).start()
+        overrides.update({"deploy.router_port": router_port, "deploy.worker_router": proxy.endpoint})
     if demos:
         overrides.update({"replay.demo_mode": "retention", "replay.demo_paths": demos, "replay.capacity": 9_000})
     cfg = load_run_config(overrides=overrides)
@@ -219,17 +272,28 @@ def run_fault(name: str, work: Path, env_steps: int, demos: str | None) -> dict:
         inject = ReadOnlyRunDir(run_dir, at_steps=env_steps // 8, until_steps=env_steps // 2, seconds=spec["read_only_s"])
     elif spec.get("flood_actors"):
         inject = StatsFlood(run_dir, at_steps=env_steps // 4, actors=spec["flood_actors"])
+    elif proxy is not None:
+        link = spec["link"]
+        inject = LinkFault(run_dir, proxy, resets_at=[int(env_steps * f) for f in link.get("resets_at", ())],
+                           hold_at=int(env_steps * link["hold_at"]) if "hold_at" in link else None,
+                           hold_s=link.get("hold_s", 0.0))
     else:
-        inject = FaultInjector(run_dir, spec["component"], at_steps=env_steps // 4, ready=ready)
+        inject = FaultInjector(run_dir, spec["component"], at_steps=int(env_steps * spec.get("at", 0.25)), ready=ready,
+                               when_stopped=checkpointing(run_dir) if spec.get("while") == "checkpointing" else None)
     inject.start()
     from .local import train_local
 
     out = io.StringIO()
     started = time.monotonic()
-    rc = train_local(cfg, out=out)
-    inject.stop()
+    try:
+        rc = train_local(cfg, out=out)
+    finally:
+        inject.stop()
+        if proxy is not None:
+            proxy.stop()
     row: dict = {"fault": name, "rc": rc, "wall_s": round(time.monotonic() - started, 1),
-                 "injected": inject.struck, "recovery_s": inject.recovery_s}
+                 "injected": inject.struck, "recovery_s": inject.recovery_s,
+                 **({"stops": inject.stops} if getattr(inject, "when_stopped", None) else {})}
     try:
         summary = json.loads((run_dir / "summary.json").read_text())
         replay = json.loads((run_dir / "replay_stats.json").read_text())
@@ -245,6 +309,12 @@ def run_fault(name: str, work: Path, env_steps: int, demos: str | None) -> dict:
     if spec.get("read_only_s"):  # the fault must have struck: writes failed, counted, and training went on
         row["write_failures_counted"] = failures = _write_failures(summary, replay)
         row["survived"] = row["survived"] and inject.struck and sum(failures.values()) > 0
+    if proxy is not None:  # every strike landed, while the run went on, and nothing was lost
+        stats = proxy.stats.as_dict()
+        row["link"] = {k: stats[k] for k in ("connections", "resets", "bytes_up", "bytes_down",
+                                             "delay_ms_min_mean_max")}
+        row["link"]["strikes"] = inject.done
+        row["survived"] = row["survived"] and inject.struck
     if spec.get("flood_actors"):
         row.update(inject.report())
         row["survived"] = (row["survived"] and inject.struck and not summary.get("restarts")
@@ -274,6 +344,50 @@ def _monotonic(summary: dict) -> bool:
 def _write_failures(summary: dict, replay: dict) -> dict[str, int]:
     return {"replay_checkpoint": int((replay.get("checkpoint") or {}).get("failures", 0)),
             "learner": int(summary["learner"].get("checkpoint_failures", 0))}
+
+
+@dataclass(eq=False)
+class LinkFault(threading.Thread):
+    """Strikes the workers' link through ``proxy`` once the run has made each of ``resets_at`` env
+    steps (every live connection reset) and ``hold_at`` (a cut of ``hold_s``: nothing moves, no
+    connection closes); recovery is measured from the last strike (from the end of a cut)."""
+
+    run_dir: Path
+    proxy: Any
+    resets_at: list[int]
+    hold_at: int | None = None
+    hold_s: float = 0.0
+    timeout_s: float = 300.0
+    done: list[str] = field(default_factory=list)
+    recovery_s: float | None = None
+    _halt: threading.Event = field(default_factory=threading.Event)
+
+    def __post_init__(self) -> None:
+        threading.Thread.__init__(self, daemon=True, name="inject-link")
+
+    def run(self) -> None:
+        deadline = time.monotonic() + self.timeout_s
+        plan = sorted([(at, "reset") for at in self.resets_at]
+                      + ([(self.hold_at, "cut")] if self.hold_at is not None else []))
+        for at, what in plan:
+            if not _wait_until(lambda: _reached(self.run_dir, at)() and bool(self.proxy.live()), deadline, self._halt):
+                return
+            if what == "reset":
+                resets = [self.proxy.reset_one() for _ in self.proxy.live()]
+                self.done.append(f"reset {sum(r is not None for r in resets)} at {at}")
+            else:
+                self.proxy.hold(self.hold_s)
+                self._halt.wait(self.hold_s)
+                self.done.append(f"cut {self.hold_s:g} s at {at}")
+            before, since = logged_env_steps(self.run_dir), time.monotonic()
+        self.recovery_s = _recovery_s(self.run_dir, before, since, deadline, self._halt)
+
+    @property
+    def struck(self) -> bool:
+        return len(self.done) == len(self.resets_at) + (self.hold_at is not None)
+
+    def stop(self) -> None:
+        self._halt.set()
 
 
 @dataclass(eq=False)

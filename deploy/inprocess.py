@@ -54,6 +54,9 @@ class InProcessActorLinks:
     def send_episode(self, record: wire.EpisodeRecord) -> None:
         self.board.episodes.append(wire.encode_episode(record))
 
+    def flush(self) -> bool:
+        return True  # send_transitions stored it before returning
+
     def latest_weights(self) -> bytes | None:
         with self.board.cond:
             if self.board.weights and self.board.weights is not self._seen:

@@ -49,9 +49,11 @@ class RunDirLock:
             self._fd = None
 
 
-#: What a run leaves in its run dir that a new run must not silently reuse.
+#: What a run leaves in its run dir that a new run must not silently reuse (and RUN_STATE_GLOBS:
+#: each replay shard's checkpoint, write-ahead log and stats; a stale log would be replayed).
 RUN_STATE = ("config.yaml", "replay_checkpoint", "checkpoints", "summary.json", "replay_stats.json",
              "metrics.jsonl", "tb", "logs")
+RUN_STATE_GLOBS = ("replay_checkpoint*", "replay_stats*.json")
 
 
 def prepare_run_dir(run_dir: Path, resume: bool, overwrite: bool, out: TextIO) -> None:
@@ -63,8 +65,9 @@ def prepare_run_dir(run_dir: Path, resume: bool, overwrite: bool, out: TextIO) -
         raise LaunchError(f"--resume {run_dir}: no run there (no config.yaml)")
     if overwrite and used:
         print(f"train: --overwrite: removing the previous run's state in {run_dir}", file=out, flush=True)
-        for name in RUN_STATE:
-            path = run_dir / name
+        paths = [run_dir / name for name in RUN_STATE]
+        paths += [p for pattern in RUN_STATE_GLOBS for p in sorted(run_dir.glob(pattern)) if p not in paths]
+        for path in paths:
             shutil.rmtree(path, ignore_errors=True) if path.is_dir() else path.unlink(missing_ok=True)
 
 

@@ -2,23 +2,33 @@
 
 A checkpoint copies the ring in chunks; each chunk is copied under the core's lock (about a
 millisecond), and the lock is released between chunks, so actors and the learner keep going
-while it runs. Every row carries its item's key (insertion counter), so the snapshot is a set of
-complete items even when inserts overwrite rows mid-checkpoint: a row copied after being
-overwritten simply holds the newer item. The files go to a temp directory that is renamed over
-the previous checkpoint at the end, so a crash (even kill -9) leaves either the old or the new
-checkpoint, never a torn one. After a kill -9, what is lost is at most what arrived since the
-last checkpoint started (``replay.checkpoint_every_s`` plus the copy time).
+while it runs. It holds the table as it was at its *cut*: the instant it starts, under the lock,
+it reads the insert counter (every row carries its item's key, the insertion counter) and the
+per-actor counters, and restore keeps only the items with keys below the cut. Items stored while
+the copy runs (the copy may catch any part of them) are not in it: with the write-ahead log
+(``wal.py``, ``replay.wal``) they are in the log's segments from the one the checkpoint started at
+the cut (``wal_from`` in meta.json), which a restart replays after the restore; without it they
+are lost and counted (each actor resumes after its last batch before the cut, so every later
+batch is a seq gap). So every item is either restored or counted. (Before format 3 the counters
+were read after the copy, and a batch the copy caught in part beside a later one it caught whole
+was neither restored nor counted.)
+
+The files go to a temp directory that is renamed over the previous checkpoint at the end, so a
+crash (even kill -9) leaves either the old or the new checkpoint, never a torn one; the log
+segments the new one holds are deleted only after the rename.
 
 The demo table is not checkpointed: it is reloaded from its shard, whose sha256 is verified.
 
 A table of stacked frames (``frames.FrameRingTable``) has ``obs_key`` / ``next_key`` in place of
 ``obs`` / ``next_obs``, and its frame ring in ``frames.npy`` + ``frame_key.npy``, copied after the
-rows. Frames overwritten between the two copies belong to the oldest items (the ring is FIFO);
-restore drops those items as the ring would have, and keeps every item whose frames are all there.
+rows (frames with keys from the cut on are left out). Frames overwritten between the two copies
+belong to the oldest items (the ring is FIFO); restore drops those items as the ring would have,
+and keeps every item whose frames are all there.
 
 Layout of ``<run dir>/replay_checkpoint/``: one ``.npy`` per column (``obs``, ``next_obs``,
-``action``, ``reward``, ``terminated``, ``truncated``, ``steps``, ``actor``, ``version``, ``key``) and
-``meta.json`` (format version, schema, counters, per-actor stats).
+``action``, ``reward``, ``terminated``, ``truncated``, ``steps``, ``actor``, ``version``, ``seq``,
+``key``) and ``meta.json`` (format version, schema, the cut, counters, per-actor stats and the
+seqs still fillable (``gaps``) at the cut, ``wal_from``).
 
 Room: replay_server (component). May import: the contract and laneshift.replay_server; never another
 component.
@@ -31,7 +41,7 @@ import os
 import shutil
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -40,7 +50,7 @@ from .frames import FrameRingTable
 if TYPE_CHECKING:  # pragma: no cover
     from .core import ReplayCore
 
-FORMAT = 2  # 2: the steps column (n-step returns)
+FORMAT = 3  # 2: the steps column (n-step returns); 3: the cut (items, counters as of the start), wal_from
 COLUMNS = ("obs", "next_obs", "action", "reward", "terminated", "truncated", "steps", "actor", "version", "seq", "key")
 FRAME_COLUMNS = ("obs_key", "next_key") + COLUMNS[2:]
 CHUNK_BYTES = 4 * 2**20  # rows copied per lock hold: ~4 MiB
@@ -76,20 +86,46 @@ class CheckpointError(ValueError):
     pass
 
 
-def write_checkpoint(core: "ReplayCore", directory: str | Path) -> dict:
-    """Snapshot ``core``'s online table into ``directory`` (atomically replaced)."""
+class CutLog(Protocol):
+    """What a checkpoint needs of the write-ahead log (``wal.WriteAheadLog``)."""
+
+    def rotate(self) -> int: ...
+
+    def segments_done(self, wal_from: int) -> None: ...
+
+
+def write_checkpoint(core: "ReplayCore", directory: str | Path, wal: CutLog | None = None) -> dict:
+    """Snapshot ``core``'s online table into ``directory`` (atomically replaced), as of its cut.
+
+    With ``wal``, a new log segment starts at the cut, and once the checkpoint is in place the
+    segments before it are deleted."""
     directory = Path(directory)
     tmp = directory.with_name(directory.name + ".tmp")
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(parents=True)
     table = core.online
     started = time.monotonic()
+    frames = isinstance(table, FrameRingTable)
+    with core.lock:  # the cut: what the checkpoint holds, and where the log goes on
+        meta = {"format": FORMAT, "obs_shape": list(core.schema.obs_shape), "obs_dtype": core.schema.obs_dtype,
+                "n_actions": core.schema.n_actions, "capacity": table.capacity,
+                # Items with keys in [tail, cut) are the checkpoint's; the counters below are theirs.
+                "cut": table.inserted, "tail": table.tail, "frame_cut": table.store.inserted if frames else None,
+                "actors": {k: dict(v) for k, v in core.actors.items()}, "actor_index": dict(core.actor_index),
+                "evicted": core.evicted_stats(),
+                "evicted_total": dict(core.evicted_total),
+                # Seqs counted lost that a worker may still send (and, sent, are no longer lost).
+                "gaps": {k: g.to_json() for k, g in core.gaps.items()},
+                "mode": core.mode, "layout": "frames" if frames else "stacks",
+                # Which run wrote it: a server of another run (or another env) refuses to restore it.
+                "identity": dict(core.identity),
+                # The first log segment not in this checkpoint (None: written without a log).
+                "wal_from": wal.rotate() if wal is not None else None}
     # Ordinary file writes, not a memmap: on a full disk a memmap copy dies with SIGBUS (measured:
     # the server crashed, restarted 4 times and lost 86 % of the run), a write() raises OSError,
     # which the caller reports and retries later while the previous checkpoint stays valid.
     names = _columns(table)
     files = {name: (tmp / f"{name}.npy").open("wb") for name in names}
-    frames = isinstance(table, FrameRingTable)
     if frames:
         files.update({name: (tmp / f"{name}.npy").open("wb") for name in ("frames", "frame_key")})
     try:
@@ -98,26 +134,15 @@ def write_checkpoint(core: "ReplayCore", directory: str | Path) -> dict:
         if frames:  # after the rows: see the module's docstring
             _copy_chunked(core, {"frames": table.store.frames, "frame_key": table.store.key},
                           {name: files[name] for name in ("frames", "frame_key")})
-        with core.lock:
-            meta = {"format": FORMAT, "obs_shape": list(core.schema.obs_shape), "obs_dtype": core.schema.obs_dtype,
-                    "n_actions": core.schema.n_actions, "capacity": table.capacity, "inserted": table.inserted,
-                    "actors": {k: dict(v) for k, v in core.actors.items()}, "actor_index": dict(core.actor_index),
-                    # Read together with "actors", after the copy: restore uses it to drop a batch
-                    # the copy caught in part and to find each actor's env steps at its last whole batch.
-                    "batch_history": {k: [list(b) for b in h] for k, h in core.batch_history.items()},
-                    "evicted": core.evicted_stats(),
-                    "evicted_total": dict(core.evicted_total),
-                    "phase": core.phase, "mode": core.mode, "time": time.time(), "tail": table.tail,
-                    "layout": "frames" if frames else "stacks",
-                    # Which run wrote it: a server of another run (or another env) refuses to restore it.
-                    "identity": dict(core.identity)}
+        with core.lock:  # phases only move forward: the newest (a log replays the change anyway)
+            meta.update(phase=core.phase, time=time.time())
         for f in files.values():
             f.flush()
             os.fsync(f.fileno())
     finally:
         for f in files.values():
             f.close()
-    meta["items"] = items = int((keys >= max(0, meta["tail"])).sum())  # rows dropped since (frames) excluded
+    meta["items"] = items = int(((keys >= meta["tail"]) & (keys < meta["cut"])).sum())  # dropped since excluded
     (tmp / "meta.json").write_text(json.dumps(meta))
     old = directory.with_name(directory.name + ".old")
     shutil.rmtree(old, ignore_errors=True)
@@ -125,12 +150,25 @@ def write_checkpoint(core: "ReplayCore", directory: str | Path) -> dict:
         directory.rename(old)
     tmp.rename(directory)
     shutil.rmtree(old, ignore_errors=True)
-    return {"items": items, "seconds": round(time.monotonic() - started, 3), "path": str(directory)}
+    if wal is not None:
+        wal.segments_done(meta["wal_from"])
+    return {"items": items, "seconds": round(time.monotonic() - started, 3), "path": str(directory),
+            "wal_from": meta["wal_from"]}
 
 
-def _restore_frames(store, frame_key: np.ndarray, frames: np.ndarray) -> None:
-    """Put a checkpoint's frames back at their keys (the newest ones if the ring is now smaller)."""
-    slots = np.flatnonzero(frame_key >= 0)
+def read_meta(directory: str | Path) -> dict:
+    """A checkpoint's meta.json (CheckpointError if unreadable)."""
+    directory = Path(directory)
+    try:
+        return json.loads((directory / "meta.json").read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise CheckpointError(f"replay checkpoint {directory}: unreadable meta.json ({exc})") from None
+
+
+def _restore_frames(store, frame_key: np.ndarray, frames: np.ndarray, below: int) -> None:
+    """Put a checkpoint's frames (keys below ``below``: from before its cut) back at their keys
+    (the newest ones if the ring is now smaller)."""
+    slots = np.flatnonzero((frame_key >= 0) & (frame_key < below))
     slots = slots[np.argsort(frame_key[slots], kind="stable")][-store.capacity:]
     if not slots.size:
         return
@@ -140,42 +178,15 @@ def _restore_frames(store, frame_key: np.ndarray, frames: np.ndarray) -> None:
     store.inserted = int(fkeys.max()) + 1
 
 
-def _whole_batches(order: np.ndarray, actor: np.ndarray, seq: np.ndarray, index: dict[str, int],
-                   history: dict[str, dict[int, tuple[int, int]]]) -> tuple[np.ndarray, dict[str, tuple[int, int | None]]]:
-    """Drop each actor's newest batch if the chunked copy caught it only in part, and say where each
-    actor resumes: (seq of its newest whole batch, its env steps then; None if not in the history).
-
-    ``order`` holds the rows to restore. The copy sweeps the ring once, so of each actor's batches it
-    holds all up to some point (older ones the ring overwrote aside) plus at most one in part.
-    """
-    keep = np.ones(order.size, bool)
-    resume: dict[str, tuple[int, int | None]] = {}
-    for name, i in index.items():
-        mine = np.flatnonzero(actor[order] == i)
-        if not mine.size:
-            continue
-        seqs = seq[order][mine]
-        newest = int(seqs.max())
-        known = history.get(name, {})
-        if newest not in known:
-            resume[name] = (newest, None)
-        elif int((seqs == newest).sum()) < known[newest][1]:
-            keep[mine[seqs == newest]] = False  # a part of a batch: its items count as lost, none kept
-            resume[name] = (newest - 1, known[newest][0] - known[newest][1])
-        else:
-            resume[name] = (newest, known[newest][0])
-    return order[keep], resume
-
-
 def restore_checkpoint(core: "ReplayCore", directory: str | Path) -> int:
-    """Put a checkpoint's items back into a fresh core (in key order). Returns items restored."""
+    """Put a checkpoint's items back into a fresh core (in key order), with every actor's counters
+    as of the cut. Returns items restored. (The log's segments from ``wal_from`` on go after it:
+    ``wal.replay``.)"""
     directory = Path(directory)
-    try:
-        meta = json.loads((directory / "meta.json").read_text())
-    except (OSError, json.JSONDecodeError) as exc:
-        raise CheckpointError(f"replay checkpoint {directory}: unreadable meta.json ({exc})") from None
+    meta = read_meta(directory)
     if meta.get("format") != FORMAT:
-        raise CheckpointError(f"replay checkpoint {directory}: format {meta.get('format')} != {FORMAT}")
+        raise CheckpointError(f"replay checkpoint {directory}: format {meta.get('format')} != {FORMAT}"
+                              + (" (written before the cut and the write-ahead log)" if meta.get("format") == 2 else ""))
     if (tuple(meta["obs_shape"]) != core.schema.obs_shape or meta["obs_dtype"] != core.schema.obs_dtype
             or meta["n_actions"] != core.schema.n_actions):
         raise CheckpointError(f"replay checkpoint {directory}: observation {meta['obs_shape']} {meta['obs_dtype']} / "
@@ -198,19 +209,19 @@ def restore_checkpoint(core: "ReplayCore", directory: str | Path) -> int:
         raise CheckpointError(f"replay checkpoint {directory}: {exc}") from None
     keys = np.asarray(cols["key"])
     order = np.argsort(keys, kind="stable")
-    order = order[keys[order] >= int(meta.get("tail", 0))]
+    ordered = keys[order]
+    # The cut's items: stored before it and not evicted by then (a row the copy found holding a
+    # newer item: that one is in the log, or counted lost; the older one the log's replay evicts).
+    order = order[(ordered >= int(meta["tail"])) & (ordered < int(meta["cut"]))]
     if frames:  # the frames first; then only items whose frames all came back
-        _restore_frames(table.store, np.asarray(cols["frame_key"]), cols["frames"])
+        _restore_frames(table.store, np.asarray(cols["frame_key"]), cols["frames"], int(meta["frame_cut"]))
         held = table.store.holds(np.asarray(cols["obs_key"])[order]).all(axis=1) & \
             table.store.holds(np.asarray(cols["next_key"])[order]).all(axis=1)
         order = order[held]
     if order.size and np.asarray(cols["steps"])[order].min() < 1:  # the wire refuses such items; so does this
         raise CheckpointError(f"replay checkpoint {directory}: an item with steps < 1")
-    index = {k: int(v) for k, v in meta.get("actor_index", {}).items()}
-    history = {k: {int(seq): (int(steps), int(n)) for seq, steps, n in h}
-               for k, h in meta.get("batch_history", {}).items()}
-    order, resume = _whole_batches(order, np.asarray(cols["actor"]), np.asarray(cols["seq"]), index, history)
     order = order[-table.capacity:]  # a smaller table keeps the newest items
+    index = {k: int(v) for k, v in meta.get("actor_index", {}).items()}
     with core.lock:
         # The items go back oldest first into rows 0..n-1 with keys renumbered 0..n-1: no holes and
         # no collisions whatever the old capacity was (keys only identify items for priority updates).
@@ -221,28 +232,12 @@ def restore_checkpoint(core: "ReplayCore", directory: str | Path) -> int:
         table.inserted = n
         if frames:
             table.restored(n)
-        core.restore_actors(meta.get("actors", {}), index, meta.get("batch_history", {}), meta.get("evicted", {}),
-                            meta.get("evicted_total", {}))
-        # Each actor resumes after the newest batch whose items are all here (the stats in
-        # meta.json were read after the chunked copy and may name batches it missed), with the env
-        # steps it had made by then: every batch missing after a restart shows up as a seq gap and
-        # its items as lost, and a restarted worker makes exactly the missing steps again.
-        for name, (last_seq, env_steps) in resume.items():
-            if name in core.actors:
-                stats = core.actors[name]
-                # Its counters as of that batch: the batches after it (in the stats, not in the
-                # table) are sent again by a resumed worker or counted lost, never stored twice.
-                after = [(seq, n) for seq, (_, n) in history.get(name, {}).items() if seq > last_seq]
-                for key in ("batches", "items", "stored"):
-                    stats[key] = max(0, int(stats.get(key, 0)) - (len(after) if key == "batches" else
-                                                                  sum(n for _, n in after)))
-                stats["last_seq"] = last_seq
-                if env_steps is not None:
-                    stats["env_steps"] = env_steps
+        core.selector.stored(table, table.tail, np.arange(n, dtype=np.int64))  # prioritized: leaves for them
+        # Every actor's counters as of the cut, so each resumes after its last batch before it: a
+        # batch stored after the cut is replayed from the log, or is a seq gap (counted lost).
+        core.restore_actors(meta.get("actors", {}), index, meta.get("evicted", {}), meta.get("evicted_total", {}),
+                            meta.get("gaps", {}))
         if core.cfg.pretrains and meta.get("mode") == core.mode:
             core.phase = max(core.phase, int(meta.get("phase", core.phase)))
-        # The restored items count as already sampled at the configured ratio: counting them as
-        # fresh inserts with no samples froze the actors for 10-33 s after a restart, waiting for
-        # the learner to "catch up" on data it had long learned from.
-        core.samples = int(max(0, n - core.cfg.min_size) * core.cfg.samples_per_insert)
+    core.count_restored_as_sampled()
     return n

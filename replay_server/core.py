@@ -28,6 +28,7 @@ component.
 from __future__ import annotations
 
 import collections
+import os
 import threading
 import time
 from typing import Any
@@ -49,9 +50,6 @@ MAX_ACTORS = 4096
 #: an actor evicted from this too is new when it returns, and its earlier batches read as lost
 #: (over-counted, never hidden).
 MAX_EVICTED = 4 * MAX_ACTORS
-#: Each actor's newest batches (seq, env_steps, items), kept so a checkpoint's restore can tell a
-#: batch its chunked copy caught only in part, and the env steps at the last batch it holds whole.
-BATCH_HISTORY = 64
 #: Actors listed in a stats reply: the reply stays the same size whatever the number of actors
 #: (at ~650 actors the full list outgrew the wire's 64 KiB JSON limit and broke every stats query).
 #: ``actors_total`` sums all of them; ``actor_page`` (control ``{"cmd": "actors"}``, HTTP
@@ -104,10 +102,8 @@ class ReplayCore:
         self.actor_index: dict[str, int] = {}  # actor -> its row index in the online table's actor column
         self._free_indices: collections.deque[int] = collections.deque()  # of evicted actors, reused
         self._last_seen: dict[str, float] = {}  # actor -> monotonic time of its newest batch
-        self._evicted: collections.OrderedDict[str, tuple[dict[str, int], collections.deque]] = \
-            collections.OrderedDict()
+        self._evicted: collections.OrderedDict[str, dict[str, int]] = collections.OrderedDict()
         self.evicted_total: collections.Counter[str] = collections.Counter()  # counters of evicted actors
-        self.batch_history: dict[str, collections.deque] = {}  # actor -> deque of (seq, env_steps, items)
         self.samples = 0  # rows sampled while the rate limiter applies
         self.sampled_rows = 0
         self.sampled_demo_rows = 0
@@ -118,6 +114,16 @@ class ReplayCore:
         # Who this server serves ({"run_id", "config_digest"}); written into checkpoints and checked on restore.
         self.identity: dict[str, str] = {}
         self.checkpoint_failures = 0  # checkpoint writes that failed (full disk, read-only dir)
+        # The write-ahead log (wal.WriteAheadLog, set by the server; None: none, as in unit tests):
+        # the service writes each batch to it as it arrives; the core writes phase changes, and
+        # its checkpoints cut it.
+        self.wal = None
+        self.wal_replayed: dict[str, int] = {}  # what the last start replayed from the log (wal.replay)
+        # Seqs counted lost that a worker may still send (its resend window): taken, they are no
+        # longer lost. Per actor; only actors with such seqs have an entry.
+        self.gaps: dict[str, Gaps] = {}
+        # This process: a worker that sees it change sends again what it had not seen stored.
+        self.incarnation = os.urandom(6).hex()
         self.http_url: str | None = None  # where this server's HTTP inspection API answers, if on
         # How rows are picked (selectors.py): uniform, or prioritized over [demo rows | online rows]
         # (demo leaves carry no mass in `none`, which has none, and from rehearsal's phase 2 on).
@@ -131,39 +137,56 @@ class ReplayCore:
 
     # ------------------------------------------------------------------ ingest
 
-    def ingest(self, payload: bytes | bytearray | memoryview, actor_key: str | None = None) -> str | None:
+    def ingest(self, payload: bytes | bytearray | memoryview, actor_key: str | None = None, *,
+               replaying: bool = False) -> str | None:
         """Validate and store one transitions message. Returns None, or the reason it was refused.
 
         Never raises on bad input: a malformed message is counted by reason and dropped, and it
-        is fully validated before anything is written, so no partial item can be stored.
+        is fully validated before anything is written, so no partial item can be stored. (The
+        server's write-ahead log has it on disk before this is called: ``wal.py``.)
+
+        ``replaying``: the message comes from the log at a restart (``wal.replay``): one whose seq
+        the actor's counters already hold is skipped (``"duplicate"``), and one refused is not
+        counted (it was when it first arrived): a replay never stores or counts a batch twice.
         """
+        reject = (lambda reason: reason) if replaying else self.reject
         try:
             # Views of the payload, not copies: the ring copies them below, before this returns.
             batch = decode_transitions(payload, self.schema, copy=False)
         except WireError as exc:
-            return self.reject(exc.reason)
+            return reject(exc.reason)
         except Exception:  # noqa: BLE001 - a decoder bug must not take the server down
-            return self.reject("decode_failed")
+            return reject("decode_failed")
         if actor_key is not None and actor_key != batch.actor:
-            return self.reject("actor_mismatch")
+            return reject("actor_mismatch")
         n, seq, env_steps = len(batch), batch.seq, batch.env_steps
         with self.lock:
             stats = self.actors.get(batch.actor)
             if stats is None:
                 stats = self._admit(batch.actor)
                 if stats is None:
-                    self.rejected["too_many_actors"] += 1
+                    if not replaying:
+                        self.rejected["too_many_actors"] += 1
                     return "too_many_actors"
+            last_seq = stats["last_seq"]
+            if seq <= last_seq and not self._fill_gap(batch.actor, stats, seq, n):
+                # Held already (a worker's resend that crossed the original, a log record the
+                # checkpoint holds): nothing stored or counted twice. Not an error.
+                if not replaying:
+                    stats["duplicates"] = stats.get("duplicates", 0) + 1
+                return "duplicate"
             now = time.monotonic()
             self._last_seen[batch.actor] = now
-            last_seq = stats["last_seq"]
             if seq > last_seq + 1:
                 # A gap in seq: batches lost in transit, or stored by a server that died before its
                 # checkpoint. An actor first seen at seq k > 0 lost its first k batches here (a
                 # restarted server with no checkpoint), so last_seq starts at -1, not "unknown".
                 stats["lost_batches"] += seq - last_seq - 1
                 # Items in the gap: the actor's env steps between its last stored batch and this one.
-                stats["lost_items"] += max(0, env_steps - n - stats["env_steps"])
+                charged = max(0, env_steps - n - stats["env_steps"])
+                stats["lost_items"] += charged
+                # Its seqs stay fillable: a worker that still holds them sends them again.
+                self.gaps.setdefault(batch.actor, Gaps()).add(last_seq + 1, seq, charged)
             if seq > last_seq:
                 stats["last_seq"] = seq
             stats["batches"] += 1
@@ -172,17 +195,38 @@ class ReplayCore:
                 stats["last_version"] = batch.weights_version
             if env_steps > stats["env_steps"]:
                 stats["env_steps"] = env_steps
-            self.batch_history[batch.actor].append((seq, env_steps, n))
             if self.cfg.pretrains and (self.phase == 1 or batch.phase == 1):
                 # Paper: in phase 1 the agent's own transitions are not stored.
                 self.dropped[f"{self.mode}_phase1"] += n
-                return None
-            tail = self.online.tail
-            keys = self.online.insert(batch, self.actor_index[batch.actor])
-            self.selector.stored(self.online, tail, keys)
-            stats["stored"] += n
-            self._rates.add("inserts", n, now)
+            else:
+                tail = self.online.tail
+                keys = self.online.insert(batch, self.actor_index[batch.actor])
+                self.selector.stored(self.online, tail, keys)
+                stats["stored"] += n
+                self._rates.add("inserts", n, now)
         return None
+
+    def _fill_gap(self, actor: str, stats: dict[str, int], seq: int, n: int) -> bool:
+        """A batch with ``seq`` below the actor's newest: if it is one counted lost (a gap still
+        tracked), it is no longer lost (called under the lock); else False (a duplicate)."""
+        gaps = self.gaps.get(actor)
+        if gaps is None:
+            return False
+        released = gaps.fill(seq, n)
+        if released is None:
+            return False
+        stats["lost_batches"] -= 1
+        stats["lost_items"] -= released
+        if not gaps.missing:
+            del self.gaps[actor]
+        return True
+
+    def missing(self, actor: str, from_seq: int = 0) -> list[int]:
+        """The seqs of ``actor`` counted lost that would still be taken (newest MISSING_KEPT at
+        most), from ``from_seq`` on."""
+        with self.lock:
+            gaps = self.gaps.get(actor)
+            return [s for s in gaps.missing if s >= from_seq] if gaps is not None else []
 
     def _admit(self, actor: str) -> dict[str, int] | None:
         """State for an actor not in the table (called under the lock): its remembered state if it
@@ -193,20 +237,17 @@ class ReplayCore:
             if oldest is None or time.monotonic() - self._last_seen[oldest] < self.cfg.actor_idle_evict_s:
                 return None
             self._evict(oldest)
-        remembered = self._evicted.pop(actor, None)
-        if remembered is not None:
-            stats, history = remembered
+        stats = self._evicted.pop(actor, None)
+        if stats is not None:
             for key, value in stats.items():  # its counters come back out of the evicted totals
                 if key in _SUMMED:
                     self.evicted_total[key] -= value
             self.evicted_total["count"] -= 1
         else:
             stats = {"batches": 0, "items": 0, "stored": 0, "last_seq": -1, "lost_batches": 0, "lost_items": 0,
-                     "last_version": -1, "env_steps": 0}
-            history = collections.deque(maxlen=BATCH_HISTORY)
+                     "last_version": -1, "env_steps": 0, "duplicates": 0}
         self.actor_index[actor] = self._free_indices.popleft() if self._free_indices else len(self.actor_index)
         self.actors[actor] = stats
-        self.batch_history[actor] = history
         return stats
 
     def _evict(self, actor: str) -> None:
@@ -218,7 +259,8 @@ class ReplayCore:
         if isinstance(self.online, FrameRingTable):
             self.online.forget_actor(index)
         self._last_seen.pop(actor, None)
-        self._evicted[actor] = (stats, self.batch_history.pop(actor))
+        self.gaps.pop(actor, None)  # an idle actor resends nothing: its gaps stay lost
+        self._evicted[actor] = stats
         for key in _SUMMED:
             self.evicted_total[key] += int(stats.get(key, 0))
         self.evicted_total["count"] += 1
@@ -228,26 +270,32 @@ class ReplayCore:
 
     def evicted_stats(self) -> dict[str, dict[str, int]]:
         """The remembered counters of evicted actors (call under ``lock``): for checkpoints."""
-        return {name: dict(stats) for name, (stats, _) in self._evicted.items()}
+        return {name: dict(stats) for name, stats in self._evicted.items()}
 
     def restore_actors(self, actors: dict[str, dict[str, int]], index: dict[str, int],
-                       history: dict[str, list], evicted: dict[str, dict[str, int]],
-                       evicted_total: dict[str, int]) -> None:
+                       evicted: dict[str, dict[str, int]], evicted_total: dict[str, int],
+                       gaps: dict[str, Any] | None = None) -> None:
         """Take back the actors' state from a checkpoint (call under ``lock``, on a fresh core):
-        their counters, row indices (unused ones free for new actors), recent batches, the
-        evicted actors' counters. Every restored actor counts as seen now."""
-        self.actors.update({k: {"lost_items": 0, **v} for k, v in actors.items()})
+        their counters, row indices (unused ones free for new actors), the evicted actors'
+        counters, the gaps still fillable. Every restored actor counts as seen now."""
+        self.actors.update({k: {"lost_items": 0, "duplicates": 0, **v} for k, v in actors.items()})
+        self.gaps.update({k: Gaps.from_json(v) for k, v in (gaps or {}).items() if k in self.actors})
         self.actor_index.update(index)
         used = set(index.values())
         self._free_indices.extend(i for i in range(len(index)) if i not in used)
         now = time.monotonic()
         for name in self.actors:
             self._last_seen[name] = now
-            self.batch_history[name] = collections.deque((tuple(b) for b in history.get(name, ())),
-                                                         maxlen=BATCH_HISTORY)
         for name, stats in evicted.items():
-            self._evicted[name] = (stats, collections.deque(maxlen=BATCH_HISTORY))
+            self._evicted[name] = dict(stats)
         self.evicted_total.update({k: int(v) for k, v in evicted_total.items()})
+
+    def count_restored_as_sampled(self) -> None:
+        """The items restored (checkpoint, log) count as already sampled at the configured ratio:
+        counting them as fresh inserts with no samples froze the actors for 10-33 s after a
+        restart, waiting for the learner to "catch up" on data it had long learned from."""
+        with self.lock:
+            self.samples = int(max(0, self.online.inserted - self.cfg.min_size) * self.cfg.samples_per_insert)
 
     def reject(self, reason: str) -> str:
         """Count a message refused (here or by the service before it reached the core)."""
@@ -398,6 +446,8 @@ class ReplayCore:
                 raise ValueError("rehearsal phases only move forward")
             if phase == 2 and not self.cfg.retains_demos:
                 self.selector.demos_off()  # ordinary replay now
+            if phase != self.phase and self.wal is not None and self.wal.enabled:
+                self.wal.write_phase(phase)  # a restart replays it between the batches around it
             self.phase = phase
 
     def insert_allowed(self) -> bool:
@@ -418,7 +468,10 @@ class ReplayCore:
             if cmd == "actors":  # a page of per-actor stats (stats lists only the first few)
                 return {"ok": True, **self.actor_page(body.get("offset", 0), body.get("limit", MAX_ACTOR_PAGE))}
             if cmd == "actor_state":  # where a restarted actor resumes: its stored steps and next seq
-                return {"ok": True, **self.actor_state(str(body.get("actor", "")))}
+                actor = str(body.get("actor", ""))
+                if "from_seq" in body:  # a worker's acknowledgement query: also what to send again
+                    return {"ok": True, **self.delivery_state(actor, int(body["from_seq"]))}
+                return {"ok": True, **self.actor_state(actor)}
         except (TypeError, ValueError) as exc:
             return {"ok": False, "error": str(exc)}
         return {"ok": False, "error": f"unknown command {cmd!r}"}
@@ -430,10 +483,19 @@ class ReplayCore:
         with self.lock:
             stats = self.actors.get(actor)
             if stats is None and actor in self._evicted:
-                stats = self._evicted[actor][0]
+                stats = self._evicted[actor]
             if stats is None:
                 return {"env_steps": 0, "next_seq": 0, "known": 0}
             return {"env_steps": int(stats["env_steps"]), "next_seq": int(stats["last_seq"]) + 1, "known": 1}
+
+    def delivery_state(self, actor: str, from_seq: int = 0) -> dict[str, Any]:
+        """What a worker needs to resend what this server lacks: ``actor_state`` plus ``missing``
+        (its seqs from ``from_seq`` on counted lost that would still be taken) and ``server`` (this
+        process's id: a new one means whatever was on its way to the old one may be gone)."""
+        state: dict[str, Any] = dict(self.actor_state(actor))
+        state["missing"] = self.missing(actor, from_seq)
+        state["server"] = self.incarnation
+        return state
 
     def actor_page(self, offset: int = 0, limit: int = MAX_ACTOR_PAGE) -> dict[str, Any]:
         """Per-actor stats, ``limit`` (at most MAX_ACTOR_PAGE) actors from ``offset`` in name order."""
@@ -505,6 +567,8 @@ class ReplayCore:
                 "actors": {k: dict(self.actors[k]) for k in shown},
                 "actors_total": self._actors_total(),
                 "rates": self._rates.rates(),
+                "wal": ({**(self.wal.state() if self.wal is not None else {"mode": "off"}),
+                         **({"replayed": dict(self.wal_replayed)} if self.wal_replayed else {})}),
                 "checkpoint": {**self.last_checkpoint,
                                "age_s": round(time.monotonic() - self.last_checkpoint["monotonic"], 1),
                                "failures": self.checkpoint_failures}
@@ -514,7 +578,74 @@ class ReplayCore:
             }
 
 
-_SUMMED = ("batches", "items", "stored", "lost_batches", "lost_items", "env_steps")
+_SUMMED = ("batches", "items", "stored", "lost_batches", "lost_items", "env_steps", "duplicates")
+
+#: Seqs counted lost that stay fillable, per actor: the newest this many (a worker holds at most
+#: its MAX_IN_FLIGHT unacknowledged batches, 64, so older ones can never come).
+MISSING_KEPT = 256
+
+
+class Gaps:
+    """One actor's seqs counted lost that may still arrive, with the items each gap was charged
+    (from the actor's env steps). A batch that fills a seq takes its items off its gap's charge;
+    the gap's last seq filled takes the rest, so a gap filled whole counts exactly 0 lost.
+
+        >>> g = Gaps(); g.add(3, 6, 30)  # seqs 3, 4, 5: 30 items counted lost
+        >>> g.fill(4, 10), g.fill(4, 10), g.missing
+        (10, None, [3, 5])
+        >>> g.fill(3, 10), g.fill(5, 8)
+        (10, 10)
+    """
+
+    def __init__(self) -> None:
+        self._seq_gap: dict[int, int] = {}  # missing seq -> its gap's first seq, ascending
+        self._gap: dict[int, list[int]] = {}  # gap's first seq -> [items still charged, seqs still tracked]
+
+    @property
+    def missing(self) -> list[int]:
+        return list(self._seq_gap)
+
+    def add(self, first: int, end: int, charged: int) -> None:
+        """Seqs ``first .. end - 1`` were skipped, ``charged`` items counted lost for them."""
+        tracked = range(max(first, end - MISSING_KEPT), end)
+        if not tracked:
+            return
+        self._gap[first] = [charged, len(tracked)]
+        for s in tracked:
+            self._seq_gap[s] = first
+        while len(self._seq_gap) > MISSING_KEPT:  # the oldest stay lost for good
+            s = next(iter(self._seq_gap))
+            self._forget(s, self._seq_gap.pop(s))
+
+    def fill(self, seq: int, n: int) -> int | None:
+        """``seq`` arrived with ``n`` items: the items no longer lost, or None if it is not missing."""
+        first = self._seq_gap.pop(seq, None)
+        if first is None:
+            return None
+        gap = self._gap[first]
+        gap[1] -= 1
+        released = gap[0] if gap[1] == 0 else min(n, gap[0])
+        gap[0] -= released
+        if gap[1] == 0:
+            del self._gap[first]
+        return released
+
+    def _forget(self, seq: int, first: int) -> None:
+        gap = self._gap[first]
+        gap[1] -= 1
+        if gap[1] == 0:
+            del self._gap[first]
+
+    def to_json(self) -> dict[str, Any]:
+        return {"missing": [[s, f] for s, f in self._seq_gap.items()],
+                "gaps": [[f, c, t] for f, (c, t) in self._gap.items()]}
+
+    @classmethod
+    def from_json(cls, body: dict[str, Any]) -> "Gaps":
+        g = cls()
+        g._gap = {int(f): [int(c), int(t)] for f, c, t in body.get("gaps", [])}
+        g._seq_gap = {int(s): int(f) for s, f in sorted(body.get("missing", [])) if int(f) in g._gap}
+        return g
 
 
 def _take(column: Any, rows: np.ndarray, out: np.ndarray) -> None:

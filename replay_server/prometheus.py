@@ -39,7 +39,7 @@ def _family(kind: str, name: str, help_text: str, samples: list[tuple[dict[str, 
 def stats_metrics(stats: dict) -> list:
     """``full_stats()`` as metric families (the counters are the core's own, read at scrape time)."""
     t = stats["tables"]
-    rl, ckpt = stats.get("rate_limiter") or {}, stats.get("checkpoint") or {}
+    rl, ckpt, wal = stats.get("rate_limiter") or {}, stats.get("checkpoint") or {}, stats.get("wal") or {}
     actors = sorted(stats.get("actors", {}).items())
     in_buffer = t["online"].get("items_per_actor", {})
 
@@ -84,6 +84,8 @@ def stats_metrics(stats: dict) -> list:
             ("lost_batches", "counter", "actor_lost_batches", "Messages missing from the sequence, by actor."),
             ("lost_items", "counter", "actor_lost_items",
              "Items in the missing messages (from the actor's env-step count), by actor."),
+            ("duplicates", "counter", "actor_duplicates",
+             "Messages received again that the server held already (ignored), by actor."),
             ("env_steps", "counter", "actor_env_steps", "An actor's cumulative env steps."),
             ("last_version", "gauge", "actor_weights_version", "Newest weights version an actor acted with.")):
         out.append(_family(kind, name, help_text, [({"actor": a}, s.get(field)) for a, s in actors]))
@@ -103,6 +105,12 @@ def stats_metrics(stats: dict) -> list:
         _family("gauge", "checkpoint_duration_seconds", "How long the last checkpoint took.", one(ckpt.get("seconds"))),
         _family("counter", "checkpoint_failures", "Checkpoint writes that failed (e.g. a full disk).",
                 one(ckpt.get("failures", 0))),
+        _family("gauge", "wal_bytes", "Bytes of write-ahead log a restart would replay (absent without a log).",
+                one(wal.get("bytes"))),
+        _family("counter", "wal_records", "Records written to the write-ahead log (absent without a log).",
+                one(wal.get("records_written"))),
+        _family("counter", "wal_failures", "Write-ahead log writes that failed (e.g. a full disk).",
+                one(wal.get("failures"))),
     ]
     return out
 

@@ -1,7 +1,10 @@
 """The replay server process: ReplayCore behind zenoh.
 
 - subscribes to ``laneshift/<run>/transitions/*``; a FIFO channel feeds one ingest thread, so
-  a slow server back-pressures publishers (they use BLOCK) instead of losing data;
+  a slow server back-pressures publishers (they use BLOCK) instead of losing data; with the
+  write-ahead log (``replay.wal``, wal.py) a logger thread drains the channel, writes each batch
+  to the log and queues it (``LOGGED_QUEUE``) for the ingest thread, so what arrived is on disk
+  even while the ingest thread is behind;
 - answers ``.../replay/sample`` (SampleRequest -> BATCH or ERROR), ``.../replay/stats`` (JSON),
   ``.../replay/control`` (JSON commands such as ``{"cmd": "set_phase", "phase": 2}``) and
   ``.../replay/info`` (JSON: the observation shape/dtype and action count TRANSITIONS must have).
@@ -17,6 +20,7 @@ from __future__ import annotations
 import bisect
 import json
 import os
+import queue
 import shutil
 import signal
 import sys
@@ -30,7 +34,8 @@ from laneshift import transport, wire
 from laneshift.config import RunConfig
 from laneshift.envspec import EnvSpec
 
-from .checkpoint import CheckpointError, restore_checkpoint, write_checkpoint
+from . import wal as wal_log
+from .checkpoint import CheckpointError, read_meta, restore_checkpoint, write_checkpoint
 from .core import ReplayCore
 from .demo_loading import load_demo_table
 
@@ -57,12 +62,17 @@ class SampleLatency:
             return {r: (list(c), self._sums[r]) for r, c in self._counts.items()}
 
 
+#: Batches logged but not yet applied, at most (then the logger waits, and back-pressure goes on
+#: through the zenoh channel to the publishers). They are on disk: none is lost to a kill -9.
+LOGGED_QUEUE = 256
+
+
 class ReplayService:
     """Wires a ReplayCore to a zenoh session. ``start()`` returns at once; ``stop()`` joins."""
 
     def __init__(self, core: ReplayCore, session: zenoh.Session, run_id: str,
                  checkpoint_dir: Path | None = None, checkpoint_every_s: float = 0.0,
-                 ingest_session: zenoh.Session | None = None):
+                 ingest_session: zenoh.Session | None = None, wal: wal_log.WriteAheadLog | None = None):
         self.core = core
         self.session = session
         # Transitions arrive on a session of their own, so a backlog of them (back-pressure) never
@@ -70,7 +80,12 @@ class ReplayService:
         self.ingest_session = ingest_session or session
         self.run_id = run_id
         self.checkpoint_dir, self.checkpoint_every_s = checkpoint_dir, checkpoint_every_s
+        # The write-ahead log checkpoints cut (rotate) and trim; it asks for one when it grows too big.
+        self.wal = wal
         self.stop_event = threading.Event()
+        self._logged: queue.Queue = queue.Queue(LOGGED_QUEUE)  # (actor, payload, on disk?) for the ingest thread
+        # Wakes the checkpoint loop: the log's "too big" signal, or stop().
+        self._wake = wal.checkpoint_due if self._wal_bounded else threading.Event()
         self._threads: list[threading.Thread] = []
         self._checkpoint_lock = threading.Lock()  # one checkpoint at a time (periodic vs final)
         # On the core, like http_url: the HTTP API (which gets only the core) reads it for /metrics.
@@ -86,7 +101,13 @@ class ReplayService:
     def start(self) -> "ReplayService":
         sub = self.ingest_session.declare_subscriber(wire.transitions_wildcard(self.run_id),
                                                      zenoh.handlers.FifoChannel(1024))
-        ingest = threading.Thread(target=self._drain, args=(sub, self._ingest), name="replay-ingest", daemon=True)
+        if self.wal is not None and self.wal.enabled:  # received -> logged (logger) -> applied (ingest)
+            logger = threading.Thread(target=self._drain, args=(sub, self._log), name="replay-wal", daemon=True)
+            ingest = threading.Thread(target=self._apply_logged, name="replay-ingest", daemon=True)
+            logger.start()
+            self._threads.append(logger)
+        else:
+            ingest = threading.Thread(target=self._drain, args=(sub, self._ingest), name="replay-ingest", daemon=True)
         ingest.start()
         self._threads.append(ingest)
         prio_sub = self.session.declare_subscriber(wire.priorities_key(self.run_id), zenoh.handlers.FifoChannel(256))
@@ -94,7 +115,7 @@ class ReplayService:
                                 args=(prio_sub, lambda sample: self.core.handle_priorities(sample.payload.to_bytes())))
         prio.start()
         self._threads.append(prio)
-        if self.checkpoint_dir is not None and self.checkpoint_every_s > 0:
+        if self.checkpoint_dir is not None and (self.checkpoint_every_s > 0 or self._wal_bounded):
             ckpt = threading.Thread(target=self._checkpoint_loop, name="replay-checkpoint", daemon=True)
             ckpt.start()
             self._threads.append(ckpt)
@@ -132,6 +153,49 @@ class ReplayService:
             return
         self.core.ingest(sample.payload.to_bytes(), actor)
 
+    def _log(self, sample: zenoh.Sample) -> None:
+        """The logger thread: a received batch onto the log, then into the ingest thread's queue."""
+        try:
+            actor = wire.actor_from_transitions_key(str(sample.key_expr))
+        except ValueError:
+            self.core.reject("bad_key")
+            return
+        payload = sample.payload.to_bytes()
+        item = (actor, payload, self.wal.write_transitions(actor, payload))
+        while True:  # blocks while the queue is full (back-pressure); ends with the service
+            try:
+                self._logged.put(item, timeout=0.1)
+                return
+            except queue.Full:
+                if self.stop_event.is_set():
+                    return  # on disk: the next start replays it
+
+    def _apply_logged(self) -> None:
+        """The ingest thread with a log: apply each logged batch, then tell the log. Goes on after
+        stop() until the queue is empty, so the final checkpoint has what was logged."""
+        while True:
+            try:
+                actor, payload, logged = self._logged.get(timeout=0.1)
+            except queue.Empty:
+                if self.stop_event.is_set():
+                    return
+                continue
+            try:
+                self.core.ingest(payload, actor)
+            except Exception:  # noqa: BLE001 - never let one message stop the thread
+                self.core.reject("internal_error")
+            finally:
+                if logged:
+                    self.wal.applied()
+                self._logged.task_done()
+
+    def drain(self, timeout_s: float) -> bool:
+        """Wait (at most ``timeout_s``) until every logged batch is applied: before a final checkpoint."""
+        deadline = time.monotonic() + timeout_s
+        while self._logged.unfinished_tasks and time.monotonic() < deadline:
+            time.sleep(0.01)
+        return not self._logged.unfinished_tasks
+
     def _flow_loop(self, period_s: float = 0.01, heartbeat_s: float = 0.25) -> None:
         """Tell actors whether they may insert: on every change, and as a heartbeat."""
         pub = self.session.declare_publisher(wire.replay_flow_key(self.run_id))
@@ -143,9 +207,21 @@ class ReplayService:
                 pub.put(wire.encode_json({"insert_ok": ok}))
                 last, last_sent = ok, now
 
-    def _checkpoint_loop(self) -> None:
-        while not self.stop_event.wait(self.checkpoint_every_s):
-            self.checkpoint()
+    @property
+    def _wal_bounded(self) -> bool:
+        return self.wal is not None and self.wal.enabled and self.wal.max_bytes > 0
+
+    def _checkpoint_loop(self, retry_s: float = 5.0) -> None:
+        """A checkpoint every ``checkpoint_every_s`` (0: never on a timer), and at once when the
+        write-ahead log outgrows ``replay.wal_max_mb`` (a failed one is retried after ``retry_s``
+        at the soonest, so a full disk does not make it spin)."""
+        every = self.checkpoint_every_s if self.checkpoint_every_s > 0 else None
+        while not self.stop_event.is_set():
+            self._wake.wait(every)
+            if self.stop_event.is_set():
+                return
+            if self.checkpoint() is None:
+                self.stop_event.wait(max(retry_s, every or 0.0))
 
     def checkpoint(self) -> dict | None:
         """Write a checkpoint now (inserts and samples continue meanwhile)."""
@@ -153,7 +229,7 @@ class ReplayService:
             return None
         with self._checkpoint_lock:
             try:
-                info = write_checkpoint(self.core, self.checkpoint_dir)
+                info = write_checkpoint(self.core, self.checkpoint_dir, self.wal)
             except OSError as exc:  # a full disk must not take the server down: report, count, retry later
                 self.core.checkpoint_failures += 1
                 shutil.rmtree(self.checkpoint_dir.with_name(self.checkpoint_dir.name + ".tmp"), ignore_errors=True)
@@ -173,6 +249,7 @@ class ReplayService:
 
     def stop(self) -> None:
         self.stop_event.set()
+        self._wake.set()
 
     def join(self, timeout_s: float) -> list[str]:
         """Wait (at most ``timeout_s`` in all) for the service threads to end; the names of those
@@ -238,9 +315,7 @@ class ReplayServer:
         checkpoint_name, self.stats_name = shard_files(cfg, self.shard)
         self.checkpoint_dir = Path(cfg.train.run_dir) / checkpoint_name
         self._lock_checkpoint_dir()
-        if cfg.replay.restore and (self.checkpoint_dir / "meta.json").exists():
-            self.restored = restore_checkpoint(core, self.checkpoint_dir)  # CheckpointError: named
-            print(f"{self.who}: restored {self.restored} items from {self.checkpoint_dir}", flush=True)
+        self.wal = self._restore(core)  # CheckpointError (WalError): named
         transport.use_service_runtime()
         mode = "router" if self.embedded_router else "client"
         # Sample replies leave on this session: unbatched (transport.session_config says why).
@@ -255,7 +330,7 @@ class ReplayServer:
         self._sessions = [ingest_session, session]
         # Every replay key of this server is built from its namespace: the run id, or <run>/shard-<i>.
         self.service = ReplayService(core, session, self.namespace, self.checkpoint_dir,
-                                     cfg.replay.checkpoint_every_s, ingest_session).start()
+                                     cfg.replay.checkpoint_every_s, ingest_session, self.wal).start()
         port = core.cfg.http_port  # this shard's (ReplayConfig.shard: the fixed port + shard index)
         if port >= 0:
             from .http_api import serve_http  # imported only when asked for: fastapi takes a while
@@ -277,6 +352,45 @@ class ReplayServer:
               f"demo sha256 {stats['tables']['demo']['sha256'][:12] or '-'})", flush=True)
         return {"http_port": self.http_port, "restored": self.restored}
 
+    def _restore(self, core: ReplayCore) -> wal_log.WriteAheadLog:
+        """The checkpoint (if any, and ``replay.restore``), then the write-ahead log's segments
+        after it; returns the log this process appends to (``replay.wal``), attached to the core.
+        Without ``replay.restore`` a stale log is deleted: it must never be replayed later."""
+        cfg = self.cfg.replay
+        wal_dir = wal_log.directory_for(self.checkpoint_dir)
+        unfinished = self.checkpoint_dir.with_name(self.checkpoint_dir.name + ".tmp")
+        if unfinished.exists():  # the previous process died writing it; the next checkpoint clears it
+            print(f"{self.who}: {unfinished} is a checkpoint the previous process died writing: not used (the "
+                  f"last whole checkpoint and the write-ahead log after it are)", flush=True)
+        has_checkpoint = (self.checkpoint_dir / "meta.json").exists()
+        try:
+            meta = read_meta(self.checkpoint_dir) if has_checkpoint else {}
+        except CheckpointError:
+            if cfg.restore:
+                raise
+            meta = {}  # not restored anyway
+        # Generations go on above every one a checkpoint or a segment names (also across restore=false).
+        after = max(wal_log.last_generation(wal_dir), int(meta.get("wal_from") or 0))
+        if cfg.restore:
+            if has_checkpoint:
+                self.restored = restore_checkpoint(core, self.checkpoint_dir)
+                print(f"{self.who}: restored {self.restored} items from {self.checkpoint_dir}", flush=True)
+            done = wal_log.replay(core, wal_dir, meta.get("wal_from"))
+            if done["segments"]:
+                core.wal_replayed = done
+                self.restored += done["items"]
+                torn = done["torn"] + done["corrupt"]
+                print(f"{self.who}: replayed {done['batches']} batches ({done['items']} items) from the write-ahead "
+                      f"log {wal_dir} ({done['segments']} segments, {done['duplicates']} already held"
+                      + (f"; {torn} torn record(s), {done['dropped_bytes']} bytes, dropped: their batches count as lost"
+                         if torn else "") + ")", flush=True)
+        elif wal_log.clear(wal_dir):
+            print(f"{self.who}: replay.restore is off: deleted the write-ahead log in {wal_dir}", flush=True)
+        log = wal_log.WriteAheadLog(wal_dir, cfg.wal, core.identity, int(cfg.wal_max_mb * 2**20), after + 1,
+                                    kept={g: p.stat().st_size for g, p in wal_log.segments(wal_dir)})
+        core.wal = log
+        return log
+
     def _lock_checkpoint_dir(self) -> None:
         """One live replay server per run dir: a second would restore, then overwrite, the first
         one's checkpoint. The lock goes with the process (kill -9 included), so a restart gets it."""
@@ -297,6 +411,7 @@ class ReplayServer:
         """Final checkpoint (SIGTERM/SIGINT keep everything received), stats file, sessions closed."""
         self._stop.set()
         self.service.stop()
+        self.service.drain(timeout_s=10.0)  # what was logged goes into the table before the final checkpoint
         final_ckpt = self.service.checkpoint()
         if final_ckpt:
             print(f"{self.who}: final checkpoint of {final_ckpt['items']} items in {final_ckpt['seconds']} s",
@@ -308,6 +423,8 @@ class ReplayServer:
         if left:
             print(f"{self.who}: threads still running after the sessions closed: {', '.join(left)}",
                   file=sys.stderr, flush=True)
+        else:  # nothing appends any more: the last segment closed (deleted if the final checkpoint holds it all)
+            self.wal.close()
         final = self.core.stats(all_actors=True)  # a file, not a reply: every actor
         final["demo_digest_start"], final["demo_digest_end"] = self.demo_digest, self.core.demo.digest()
         out = Path(self.cfg.train.run_dir) / self.stats_name

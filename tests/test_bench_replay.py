@@ -12,6 +12,7 @@ import json
 import os
 
 import numpy as np
+import pytest
 
 from laneshift import wire
 from laneshift.bench import replay as bench_replay
@@ -66,3 +67,11 @@ def test_patched_messages_decode_with_their_counters() -> None:
     for seq in (0, 1, 99, 123_456_789):
         batch = wire.decode_transitions(patcher.build(seq, (seq + 1) * 4), schema)
         assert (batch.actor, batch.seq, batch.env_steps, len(batch)) == ("w3", seq, (seq + 1) * 4, 4)
+
+
+def test_a_bad_set_is_refused_before_any_process_starts() -> None:
+    parser = argparse.ArgumentParser()
+    bench_replay.register(parser.add_subparsers())
+    args = parser.parse_args(["replay", "--set", "replay.wal=sometimes"])
+    with pytest.raises(SystemExit, match=r"replay\.wal: must be off, write or fsync"):
+        args.func(args)

@@ -23,16 +23,17 @@ from pathlib import Path
 import pytest
 
 from laneshift.config import load_run_config
-from laneshift.deploy.chaos import FAST, FAULTS, FaultInjector
+from laneshift.deploy.chaos import FAST, FAULTS, FaultInjector, checkpointing
 from laneshift.deploy.chaos import alive as _alive
 from laneshift.deploy.processes import descendants as _descendants
 from laneshift.deploy.local import train_local
 
 
-def run_with_fault(tmp_path: Path, component: str, at_steps: int, total: int = 6000, extra=lambda: True, **overrides):
+def run_with_fault(tmp_path: Path, component: str, at_steps: int, total: int = 6000, extra=lambda: True,
+                   when_stopped=None, **overrides):
     run_dir = tmp_path / "run"
     cfg = load_run_config(overrides={**FAST, "train.run_dir": str(run_dir), "train.env_steps": total, **overrides})
-    killer = FaultInjector(run_dir, component, at_steps, ready=extra)
+    killer = FaultInjector(run_dir, component, at_steps, ready=extra, when_stopped=when_stopped)
     killer.start()
     out = io.StringIO()
     rc = train_local(cfg, out=out)
@@ -89,20 +90,66 @@ def test_router_killed_comes_back_on_the_same_endpoint(tmp_path):
     assert len(endpoints) == 1, log  # same endpoint after the restart: every client reconnected
 
 
-def test_replay_server_killed_before_its_first_checkpoint_counts_every_loss(tmp_path):
-    """No checkpoint to restore: what it had stored is lost, and counted (it used to read 0 lost)."""
+def test_replay_server_without_its_log_killed_before_its_first_checkpoint_counts_every_loss(tmp_path):
+    """replay.wal off and no checkpoint to restore: what it had stored is lost, and counted (it
+    used to read 0 lost). The workers send again the batches they had not seen acknowledged; the
+    ones they had are gone, each counted whole (made == stored + lost is checked by run_with_fault)."""
     run_dir, summary, replay, text = run_with_fault(tmp_path, "replay-server", at_steps=1500,
+                                                    **{"replay.checkpoint_every_s": 0, "replay.wal": "off"})
+    lost = summary["replay"]
+    assert lost["lost_items"] > 0 and lost["lost_items"] == lost["lost_batches"] * FAST["actor.send_every"], lost
+
+
+def assert_nothing_lost(summary: dict, replay: dict) -> None:
+    """The write-ahead log keeps what the server took, the workers' resend what was on its way:
+    a kill -9 of the replay server loses nothing (made == stored is checked by run_with_fault)."""
+    lost = summary["replay"]
+    assert lost["lost_batches"] == 0 and lost["lost_items"] == 0, lost
+    assert replay["rejected"] == {}, replay["rejected"]
+
+
+def test_replay_server_killed_early_comes_back_from_its_log_alone(tmp_path):
+    """No checkpoint yet (none on a timer): the log brings back every batch the server took."""
+    run_dir, summary, replay, text = run_with_fault(tmp_path, "replay-server", at_steps=600,
                                                     **{"replay.checkpoint_every_s": 0})
-    assert summary["replay"]["lost_items"] >= 1000, summary["replay"]
+    log = (run_dir / "logs" / "replay-server.log").read_text()
+    assert "from the write-ahead log" in log and "restored" not in log, log
+    assert_nothing_lost(summary, replay)
 
 
 def test_replay_server_killed_after_a_checkpoint_restores_it(tmp_path):
     meta = tmp_path / "run" / "replay_checkpoint" / "meta.json"
     run_dir, summary, replay, text = run_with_fault(
-        tmp_path, "replay-server", at_steps=1500, extra=lambda: meta.exists() and json.loads(meta.read_text())["items"] >= 500,
+        tmp_path, "replay-server", at_steps=3000, extra=lambda: meta.exists() and json.loads(meta.read_text())["items"] >= 500,
         **{"replay.checkpoint_every_s": 0.5})
     log = (run_dir / "logs" / "replay-server.log").read_text()
     assert "restored" in log
+    assert_nothing_lost(summary, replay)
+
+
+def test_replay_server_killed_near_the_end_loses_nothing(tmp_path):
+    """At 90 % of the budget: the workers may spend theirs while the server is down; each waits
+    until the restarted server holds all it sent, sending again what it lacks."""
+    run_dir, summary, replay, text = run_with_fault(tmp_path, "replay-server", at_steps=5400,
+                                                    **{"replay.checkpoint_every_s": 0.5})
+    assert_nothing_lost(summary, replay)
+
+
+def test_replay_server_killed_while_writing_a_checkpoint_loses_nothing(tmp_path):
+    """Checkpoints back to back; the server is stopped (SIGSTOP) until one is seen in the middle of
+    its copy, then killed: the restart restores the last whole one and replays the log after its
+    cut, so the batches the copy caught in part are all back (they used to be dropped, or lost
+    uncounted)."""
+    run_dir = tmp_path / "run"
+    run_dir_, summary, replay, text = run_with_fault(
+        tmp_path, "replay-server", at_steps=2000, extra=lambda: (run_dir / "replay_checkpoint" / "meta.json").exists(),
+        when_stopped=checkpointing(run_dir), **FAULTS["replay-during-checkpoint"]["overrides"])
+    log = (run_dir / "logs" / "replay-server.log").read_text()
+    assert "a checkpoint the previous process died writing" in log and "from the write-ahead log" in log, log
+    # While the server was stopped the workers went on sending (up to their window of 64
+    # unacknowledged batches each); what the router queued for it died with it, and came again
+    # from the workers' buffers.
+    assert_nothing_lost(summary, replay)
 
 
 def test_a_service_killed_as_the_workers_finish_is_still_counted(tmp_path, monkeypatch):

@@ -123,6 +123,9 @@ class _RecordingLinks:
     def send_episode(self, record) -> None:
         pass
 
+    def flush(self) -> bool:
+        return True
+
     def latest_weights(self) -> bytes | None:
         return None
 

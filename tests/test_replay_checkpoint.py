@@ -1,5 +1,7 @@
-"""Replay checkpoints: complete items only, written while inserts go on, restored in key order,
-and a kill -9 of the server process loses at most about one checkpoint interval.
+"""Replay checkpoints: complete items only, written while inserts go on, restored in key order
+as of the checkpoint's cut, so that with the write-ahead log every item is restored and without
+it every item is restored or counted lost, whatever the copy caught; a kill -9 of the server
+process loses nothing it stored (with the log) or at most about one checkpoint interval (without).
 
 Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
 the code under test needs."""
@@ -19,7 +21,8 @@ import pytest
 from laneshift import transport, wire
 from laneshift.config import ReplayConfig, load_run_config, save_run_config
 from laneshift.deploy.processes import ProcessGroup, wait_for_file
-from laneshift.replay_server.checkpoint import CheckpointError, restore_checkpoint, write_checkpoint
+from laneshift.replay_server import wal as W
+from laneshift.replay_server.checkpoint import CheckpointError, read_meta, restore_checkpoint, write_checkpoint
 from laneshift.replay_server.core import ReplayCore
 
 SCHEMA = wire.TransitionSchema((6,), "float32", 31)
@@ -70,16 +73,24 @@ def test_restore_into_a_smaller_table_keeps_the_newest(tmp_path):
 
 
 def test_checkpoint_while_inserting_has_no_torn_items(tmp_path, monkeypatch):
+    """Checkpoints while a thread inserts as fast as it can (the ring wraps many times under each
+    copy), then the process dies: what the checkpoint holds is whole items in insertion order, and
+    with the log after it the restart is the dead server exactly. (How many of the cut's items a
+    checkpoint holds depends on how far the inserts outran the copy: a row they overwrote before
+    the copy reached it held one of the ring's oldest items, which the log's replay evicts again.
+    It used to assert "more than 0" and failed once under load: the writer had overwritten every
+    row first, which the test below does on purpose.)"""
     import laneshift.replay_server.checkpoint as ckpt
 
     monkeypatch.setattr(ckpt, "CHUNK_BYTES", 64 * 8)  # tiny chunks: many lock releases mid-copy
     core = ReplayCore(ReplayConfig(capacity=5_000, min_size=1), SCHEMA)
+    core.wal = W.WriteAheadLog(tmp_path / "wal", "write", {}, 0, first_gen=1)
     stop = threading.Event()
 
     def writer() -> None:
         seq = 0
         while not stop.is_set():
-            core.ingest(batch(seq, n=7))
+            assert receive(core, batch(seq, n=7)) is None
             seq += 1
 
     thread = threading.Thread(target=writer)
@@ -87,15 +98,56 @@ def test_checkpoint_while_inserting_has_no_torn_items(tmp_path, monkeypatch):
     try:
         time.sleep(0.05)
         for i in range(3):
-            write_checkpoint(core, tmp_path / "ckpt")
+            write_checkpoint(core, tmp_path / "ckpt", core.wal)
     finally:
         stop.set()
         thread.join()
-    fresh = ReplayCore(ReplayConfig(capacity=5_000, min_size=1), SCHEMA)
-    n = restore_checkpoint(fresh, tmp_path / "ckpt")
-    assert n > 0
-    ident = assert_items_whole(fresh)
-    assert (np.diff(ident) > 0).all()  # key order is insertion order
+    alone = ReplayCore(ReplayConfig(capacity=5_000, min_size=1), SCHEMA)
+    n = restore_checkpoint(alone, tmp_path / "ckpt")
+    ident = assert_items_whole(alone)
+    assert len(ident) == n and (np.diff(ident) > 0).all()  # key order is insertion order
+    meta = read_meta(tmp_path / "ckpt")
+    assert set(ident.tolist()) <= set(range(meta["cut"] - 5_000, meta["cut"]))  # the cut's items only
+    fresh, done = _restart(tmp_path, capacity=5_000)
+    assert done["torn"] == done["corrupt"] == 0
+    assert _content(fresh) == _content(core) and fresh.actors == core.actors
+    newest = np.arange(core.online.inserted - 5_000, core.online.inserted)  # item k is the k-th inserted
+    assert (np.sort(assert_items_whole(fresh)) == newest).all()
+
+
+@pytest.mark.parametrize("wal", ["write", "off"])
+@pytest.mark.parametrize("chunks_first", [0, 1])
+def test_inserts_that_overwrite_the_whole_ring_during_the_copy(tmp_path, monkeypatch, wal, chunks_first):
+    """The case the test above once met by chance: the ring is overwritten whole while the copy
+    runs (before its first chunk: the checkpoint holds 0 items, what that test saw; or after it:
+    the first chunk's 10). Every other item of its cut was evicted before the copy reached it, and
+    that loses nothing: with the log the restart is the dead server exactly; without it each later
+    batch is a seq gap, every item stored or counted lost."""
+    import laneshift.replay_server.checkpoint as ckpt
+
+    core = ReplayCore(ReplayConfig(capacity=100, min_size=1), SCHEMA)
+    core.wal = W.WriteAheadLog(tmp_path / "wal", wal, {}, 0, first_gen=1)
+    for seq in range(10):  # the ring full: rows 0-99
+        assert receive(core, batch(seq)) is None
+    monkeypatch.setattr(ckpt, "CHUNK_BYTES", 10 * _row_bytes(core))  # 10 rows a chunk
+    # Lock holds: the cut, then chunks of rows 0-9, 10-19, ...; 10 batches before chunk 1 or 2.
+    core.lock = _CopyHook(core.lock, after=1 + chunks_first,
+                          action=lambda: [receive(core, batch(s)) for s in range(10, 20)])
+    write_checkpoint(core, tmp_path / "ckpt", core.wal)
+    core.lock = core.lock.lock
+    kept = 10 * chunks_first  # items 0-9 if rows 0-9 were copied before the overwrite
+    meta = read_meta(tmp_path / "ckpt")
+    assert meta["cut"] == 100 and meta["items"] == kept
+    fresh, done = _restart(tmp_path)
+    if wal == "write":
+        assert done["batches"] == 10 and _content(fresh) == _content(core) and fresh.actors == core.actors
+    else:
+        assert (assert_items_whole(fresh) == np.arange(kept)).all()
+        assert fresh.actor_state("w0") == {"env_steps": 100, "next_seq": 10, "known": 1}
+    assert fresh.ingest(batch(20)) is None  # the worker goes on
+    w0 = fresh.actors["w0"]
+    assert w0["stored"] + w0["lost_items"] == w0["env_steps"] == 210
+    assert w0["lost_items"] == (0 if wal == "write" else 100)
 
 
 def test_mismatched_checkpoint_is_refused(tmp_path):
@@ -130,11 +182,14 @@ def _stats(session, run_id) -> dict:
     return wire.decode_json(reply) if reply else {}
 
 
-def test_kill_9_loses_at_most_one_interval_and_restart_restores(tmp_path):
+@pytest.mark.parametrize("wal", ["write", "off"])
+def test_kill_9_of_the_server_process_and_restart_restores(tmp_path, wal):
+    """With the log (``write``) a kill -9 at any moment keeps every batch the server had taken;
+    without it (``off``) only what the last checkpoint holds (the test waits for one)."""
     endpoint = f"tcp/127.0.0.1:{transport.free_tcp_port()}"
     cfg = load_run_config(overrides={"env.scenario": "lka", "transport.router": endpoint,
                                      "train.run_dir": str(tmp_path), "replay.checkpoint_every_s": 0.3,
-                                     "replay.capacity": 10_000, "replay.min_size": 1})
+                                     "replay.capacity": 10_000, "replay.min_size": 1, "replay.wal": wal})
     path = save_run_config(cfg, tmp_path / "config.yaml")
     group = ProcessGroup(tmp_path / "logs")
     py = [sys.executable, "-m", "laneshift"]
@@ -150,24 +205,33 @@ def test_kill_9_loses_at_most_one_interval_and_restart_restores(tmp_path):
             for seq in range(50):
                 pub.put(batch(seq))
             assert transport.wait_for(lambda: _stats(session, run_id)["tables"]["online"]["size"] == 500, 10)
-            # Wait for a checkpoint that has all 500, then kill -9 (no chance to write a final one).
-            assert transport.wait_for(lambda: (_stats(session, run_id).get("checkpoint") or {}).get("items") == 500,
-                                      10)
-            os.kill(group.procs["replay-server"].pid, signal.SIGKILL)
-            group.procs["replay-server"].wait(10)
-            (tmp_path / "ready").unlink()
-            group.start("replay-server", argv)
-            wait_for_file(tmp_path / "ready", 60, group, "replay-server")
-            stats = _stats(session, run_id)
+            if wal == "off":  # wait for a checkpoint that has all 500
+                assert transport.wait_for(
+                    lambda: (_stats(session, run_id).get("checkpoint") or {}).get("items") == 500, 10)
+
+            def kill_9_and_restart() -> dict:
+                os.kill(group.procs["replay-server"].pid, signal.SIGKILL)  # no chance to write a final checkpoint
+                group.procs["replay-server"].wait(10)
+                (tmp_path / "ready").unlink()
+                group.start("replay-server", argv)
+                wait_for_file(tmp_path / "ready", 60, group, "replay-server")
+                return _stats(session, run_id)
+
+            stats = kill_9_and_restart()
             assert stats["tables"]["online"]["size"] == 500
             assert stats["actors"]["w0"]["last_seq"] == 49
-            # SIGTERM: the final checkpoint keeps what arrived after the last periodic one.
             for seq in range(50, 60):
                 pub.put(batch(seq))
             assert transport.wait_for(lambda: _stats(session, run_id)["tables"]["online"]["size"] == 600, 10)
+            if wal == "write":  # at once, whatever the checkpoints did meanwhile: all 600 come back
+                stats = kill_9_and_restart()
+                assert stats["tables"]["online"]["size"] == 600 and stats["actors"]["w0"]["last_seq"] == 59
+                assert stats["actors_total"]["lost_items"] == 0
+        # SIGTERM: the final checkpoint keeps what arrived after the last periodic one.
         group.stop("replay-server")
         meta = json.loads((tmp_path / "replay_checkpoint" / "meta.json").read_text())
         assert meta["items"] == 600
+        assert W.segments(tmp_path / "replay_checkpoint.wal") == []  # a clean stop leaves no log to replay
     finally:
         group.stop_all()
 
@@ -221,12 +285,12 @@ def test_a_batch_after_the_copy_is_counted_lost_not_hidden_by_later_stats(tmp_pa
     for seq in range(6, 10):  # rows 60-99, then the ring is full
         core.ingest(batch(seq))
     monkeypatch.setattr(ckpt, "CHUNK_BYTES", 1)  # one row a chunk
-    # Batch 10 overwrites rows 0-9 after the copy passed them: not in the checkpoint, yet the
-    # stats read at the end name it (last_seq 10, env_steps 110).
+    # Batch 10 overwrites rows 0-9 after the copy passed them: not in the checkpoint; the counters
+    # are the cut's (last_seq 9, env_steps 100), not the end's (they used to name batch 10).
     core.lock = _CopyHook(core.lock, after=20, action=lambda: core.ingest(batch(10)))
     write_checkpoint(core, tmp_path / "ckpt")
     meta = json.loads((tmp_path / "ckpt" / "meta.json").read_text())
-    assert meta["actors"]["w0"]["last_seq"] == 10
+    assert meta["actors"]["w0"]["last_seq"] == 9 and meta["cut"] == 100
     fresh = ReplayCore(ReplayConfig(capacity=100, min_size=1), SCHEMA)
     restore_checkpoint(fresh, tmp_path / "ckpt")
     assert fresh.actor_state("w0") == {"env_steps": 100, "next_seq": 10, "known": 1}
@@ -279,3 +343,184 @@ def test_restored_counters_match_the_resume_point_so_nothing_is_stored_twice(tmp
     assert fresh.ingest(batch(3)) is None  # the resumed worker sends batch 3 again
     w0 = fresh.actors["w0"]
     assert (w0["stored"], w0["items"], w0["batches"], w0["lost_items"]) == (40, 40, 4, 0)
+
+
+def receive(core: ReplayCore, payload: bytes) -> str | None:
+    """What the service does with a received batch: log it (if the core has a log), apply it, tell the log."""
+    actor = wire.decode_transitions(payload, SCHEMA).actor
+    logged = core.wal is not None and core.wal.write_transitions(actor, payload)
+    try:
+        return core.ingest(payload, actor)
+    finally:
+        if logged:
+            core.wal.applied()
+
+
+def _row_bytes(core: ReplayCore) -> int:
+    import laneshift.replay_server.checkpoint as ckpt
+
+    return sum(getattr(core.online, n).dtype.itemsize * int(np.prod(getattr(core.online, n).shape[1:]))
+               for n in ckpt.COLUMNS)
+
+
+def _restart(tmp_path, capacity: int = 100) -> tuple[ReplayCore, dict]:
+    """A restarted server: the checkpoint, then the log's segments after its cut."""
+    fresh = ReplayCore(ReplayConfig(capacity=capacity, min_size=1), SCHEMA)
+    restore_checkpoint(fresh, tmp_path / "ckpt")
+    return fresh, W.replay(fresh, tmp_path / "wal", read_meta(tmp_path / "ckpt")["wal_from"])
+
+
+@pytest.mark.parametrize("wal", ["write", "off"])
+def test_a_batch_caught_in_part_beside_a_later_one_caught_whole_is_restored_or_counted(tmp_path, monkeypatch, wal):
+    """The gap this used to leave: the copy is at row 45 when batch 4 goes into rows 40-49 (the
+    copy catches 45-49 of it) and batch 5 into rows 50-59 (caught whole). Restore kept the part
+    of batch 4, resumed the actor after batch 5, and batch 4's other items were neither restored
+    nor counted. Now the checkpoint holds the cut (batches 0-3): with the log batches 4 and 5 are
+    replayed, without it they are a seq gap, counted lost."""
+    import laneshift.replay_server.checkpoint as ckpt
+
+    core = ReplayCore(ReplayConfig(capacity=100, min_size=1), SCHEMA)
+    core.wal = W.WriteAheadLog(tmp_path / "wal", wal, {}, 0, first_gen=1)
+    for seq in range(4):  # rows 0-39
+        assert receive(core, batch(seq)) is None
+    monkeypatch.setattr(ckpt, "CHUNK_BYTES", 5 * _row_bytes(core))  # 5 rows a chunk
+    # Lock holds: the cut, then chunks of rows 0-4, 5-9, ..., 40-44 (the 10th): then the batches.
+    core.lock = _CopyHook(core.lock, after=10, action=lambda: [receive(core, batch(4)), receive(core, batch(5))])
+    write_checkpoint(core, tmp_path / "ckpt", core.wal)
+    keys = np.load(tmp_path / "ckpt" / "key.npy")
+    assert set(keys[45:60].tolist()) == set(range(45, 60)) and (keys[40:45] == -1).all()  # what the copy caught
+    fresh, done = _restart(tmp_path)
+    if wal == "write":
+        assert done["batches"] == 2 and (assert_items_whole(fresh) == np.arange(60)).all()
+        assert fresh.actors == core.actors
+    else:
+        assert (assert_items_whole(fresh) == np.arange(40)).all()  # the cut: batches 0-3, whole
+        assert fresh.actor_state("w0") == {"env_steps": 40, "next_seq": 4, "known": 1}
+    # The worker goes on with batch 6: every item it made is stored or counted.
+    assert fresh.ingest(batch(6)) is None
+    w0 = fresh.actors["w0"]
+    assert w0["stored"] + w0["lost_items"] == w0["env_steps"] == 70
+    assert w0["lost_items"] == (0 if wal == "write" else 20)
+
+
+class _Races:
+    """Stands in for the core's lock during a checkpoint: before lock hold k (1: the cut, then one
+    per chunk copied) it runs ``actions[k]``, as inserts racing the copy would."""
+
+    def __init__(self, lock, actions: dict[int, list[bytes]], core: ReplayCore):
+        self.lock, self.actions, self.core, self.count, self.inserting = lock, actions, core, 0, False
+
+    def __enter__(self):
+        if not self.inserting:  # the inserts' own lock holds are not the copy's
+            self.count += 1
+            self.inserting = True
+            try:
+                for payload in self.actions.pop(self.count, ()):
+                    assert receive(self.core, payload) is None
+            finally:
+                self.inserting = False
+            if self.count == 1:
+                self.at_cut = _content(self.core)
+        return self.lock.__enter__()
+
+    def __exit__(self, *exc):
+        return self.lock.__exit__(*exc)
+
+
+def _content(core: ReplayCore) -> list[tuple[str, int]]:
+    """The table's items as (actor, item number), oldest first."""
+    t, names = core.online, {i: a for a, i in core.actor_index.items()}
+    rows = np.flatnonzero(t.key >= t.tail)
+    rows = rows[np.argsort(t.key[rows])]
+    return [(names[int(t.actor[r])], int(t.reward[r])) for r in rows]
+
+
+SCHEDULES = {  # lock hold -> batches (actor, seq) inserted just before it; 3 rows a chunk, 100-row ring
+    "early": {1: [("b", 2)], 2: [("a", 2), ("c", 2)], 3: [("b", 3)]},
+    "sweep-behind-inserts": {20: [("a", 2), ("b", 2)], 21: [("c", 2)], 22: [("a", 3), ("b", 3), ("c", 3)]},
+    "wraps-during-copy": {5: [("a", 2), ("b", 2), ("c", 2)], 12: [("a", 3), ("b", 3)], 18: [("c", 3), ("a", 4)],
+                          26: [("b", 4), ("c", 4), ("a", 5)], 33: [("b", 5), ("c", 5)]},
+}
+
+
+@pytest.mark.parametrize("wal", ["write", "off"])
+@pytest.mark.parametrize("schedule", sorted(SCHEDULES))
+def test_kill_after_a_checkpoint_raced_by_inserts_restores_or_counts_every_item(tmp_path, monkeypatch, schedule,
+                                                                                 wal):
+    """Three actors, inserts racing the chunked copy at several points (the ring wrapping under it
+    in one), more batches after it, then the process dies. With the log the restarted table and
+    every counter equal the dead server's; without it every actor's items are stored or counted
+    lost once it sends again: no tolerance either way."""
+    import laneshift.replay_server.checkpoint as ckpt
+
+    core = ReplayCore(ReplayConfig(capacity=100, min_size=1), SCHEMA)
+    core.wal = W.WriteAheadLog(tmp_path / "wal", wal, {}, 0, first_gen=1)
+    for seq in range(2):
+        for actor in "abc":
+            receive(core, batch(seq, actor=actor))  # 60 rows
+    monkeypatch.setattr(ckpt, "CHUNK_BYTES", 3 * _row_bytes(core))
+    real_lock = core.lock
+    core.lock = _Races(real_lock, {k: [batch(s, actor=a) for a, s in v] for k, v in SCHEDULES[schedule].items()},
+                       core)
+    write_checkpoint(core, tmp_path / "ckpt", core.wal)
+    core.lock, at_cut = real_lock, core.lock.at_cut
+    sent = {a: max([s for k, v in SCHEDULES[schedule].items() for actor, s in v if actor == a], default=1)
+            for a in "abc"}
+    for actor in "abc":  # after the checkpoint, before the kill
+        sent[actor] += 1
+        receive(core, batch(sent[actor], actor=actor))
+    fresh, done = _restart(tmp_path)
+    if wal == "write":
+        assert done["torn"] == done["corrupt"] == done["duplicates"] == 0
+        assert _content(fresh) == _content(core)
+        assert fresh.actors == core.actors
+    else:  # the table at the cut (less its oldest items, where the copy found newer ones in their rows)
+        restored = _content(fresh)
+        assert restored and restored == at_cut[len(at_cut) - len(restored):]
+    for actor in "abc":  # each worker goes on with its next batch
+        assert fresh.ingest(batch(sent[actor] + 1, actor=actor)) is None
+        stats = fresh.actors[actor]
+        assert stats["stored"] + stats["lost_items"] == stats["env_steps"] == (sent[actor] + 2) * 10, (actor, stats)
+        if wal == "write":
+            assert stats["lost_items"] == 0
+
+
+def test_restored_items_are_sampled_again_by_the_prioritized_sampler(tmp_path):
+    core = ReplayCore(ReplayConfig(capacity=100, min_size=1, sampler="prioritized"), SCHEMA)
+    for seq in range(3):
+        core.ingest(batch(seq))
+    write_checkpoint(core, tmp_path / "ckpt")
+    fresh = ReplayCore(ReplayConfig(capacity=100, min_size=1, sampler="prioritized"), SCHEMA)
+    assert restore_checkpoint(fresh, tmp_path / "ckpt") == 30
+    assert fresh.selector.tree.total > 0  # leaves for them: the first sample used to find none
+    drawn = fresh.sample(wire.SampleRequest(batch_size=16))
+    assert not isinstance(drawn, wire.WireError) and set(drawn.reward.tolist()) <= set(range(30))
+
+
+@pytest.mark.parametrize("fill", ["before the kill", "after the restart"])
+def test_a_seq_counted_lost_is_still_taken_after_a_checkpoint_and_a_kill(tmp_path, fill):
+    """Seq 2 goes missing (counted lost), a checkpoint is written, then the worker sends seq 2
+    again: before the kill (the log replays it onto the checkpoint) or to the restarted server
+    (the checkpoint kept the gap). Either way nothing is lost in the end, and a copy of a batch
+    the server holds is a duplicate, not stored twice."""
+    core = ReplayCore(ReplayConfig(capacity=100, min_size=1), SCHEMA)
+    core.wal = W.WriteAheadLog(tmp_path / "wal", "write", {}, 0, first_gen=1)
+    for seq in (0, 1, 3):
+        assert receive(core, batch(seq)) is None
+    assert core.actors["w0"]["lost_batches"] == 1 and core.missing("w0") == [2]
+    write_checkpoint(core, tmp_path / "ckpt", core.wal)
+    assert read_meta(tmp_path / "ckpt")["gaps"]["w0"]["missing"] == [[2, 2]]
+    if fill == "before the kill":
+        assert receive(core, batch(2)) is None
+        assert receive(core, batch(3)) == "duplicate"
+    fresh, done = _restart(tmp_path)
+    if fill == "before the kill":
+        # (duplicates counts the copies a live server ignored; the log's replay adds none)
+        assert done["batches"] == 1 and fresh.actors == {"w0": {**core.actors["w0"], "duplicates": 0}}
+    else:
+        assert fresh.missing("w0") == [2] and fresh.ingest(batch(2)) is None
+        assert fresh.ingest(batch(3)) == "duplicate" and fresh.actors["w0"]["duplicates"] == 1
+    w0 = fresh.actors["w0"]
+    assert (w0["stored"], w0["lost_batches"], w0["lost_items"]) == (40, 0, 0), w0
+    assert sorted(assert_items_whole(fresh).tolist()) == list(range(40))
+    assert fresh.missing("w0") == []

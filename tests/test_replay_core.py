@@ -329,17 +329,28 @@ def test_actor_mismatch():
 
 def test_per_actor_counters_and_seq_gaps():
     core = make_core(capacity=1000)
-    for seq, version in ((0, 0), (1, 1), (4, 3), (3, 2), (4, 3), (5, 2)):
-        assert core.ingest(tmsg("w0", seq, rows=4, start=seq * 4, version=version, env_steps=(seq + 1) * 4), "w0") is None
+    # Seqs 2 and 3 missing when 4 arrives (counted lost); 3 then comes late (a worker's resend: no
+    # longer lost, stored), 4 again (a duplicate: ignored, counted as such, not an error).
+    expect = {0: None, 1: None, 4: None, 3: None, "4 again": "duplicate", 5: None}
+    for key, reason in expect.items():
+        seq = 4 if key == "4 again" else key
+        msg = tmsg("w0", seq, rows=4, start=seq * 4, version=min(seq, 3), env_steps=(seq + 1) * 4)
+        assert core.ingest(msg, "w0") == reason, key
+    assert core.missing("w0") == [2]
     # First seen at seq 7: its 7 earlier batches (14 env steps before this one) never arrived here.
     assert core.ingest(tmsg("w1", 7, rows=2, start=500, env_steps=16), "w1") is None
     a = core.stats()["actors"]
-    assert a["w0"] == {"batches": 6, "items": 24, "stored": 24, "last_seq": 5, "lost_batches": 2, "lost_items": 8,
-                       "last_version": 3, "env_steps": 24}
+    assert a["w0"] == {"batches": 5, "items": 20, "stored": 20, "last_seq": 5, "lost_batches": 1, "lost_items": 4,
+                       "last_version": 3, "env_steps": 24, "duplicates": 1}
     assert a["w1"] == {"batches": 1, "items": 2, "stored": 2, "last_seq": 7, "lost_batches": 7, "lost_items": 14,
-                       "last_version": 0, "env_steps": 16}
+                       "last_version": 0, "env_steps": 16, "duplicates": 0}
+    assert core.stats()["rejected"] == {}
     # The ring remembers which actor (index in order of appearance) and version made each item.
-    assert core.online.actor[24] == 1 and core.online.version[8] == 3
+    assert core.online.actor[20] == 1 and core.online.version[8] == 3
+    # Seq 2 comes too: nothing of w0 is lost any more; every env step it made is stored once.
+    assert core.ingest(tmsg("w0", 2, rows=4, start=8, version=2, env_steps=12), "w0") is None
+    w0 = core.stats()["actors"]["w0"]
+    assert (w0["lost_batches"], w0["lost_items"], w0["stored"]) == (0, 0, 24) and core.missing("w0") == []
 
 
 def test_too_many_actors(monkeypatch):
@@ -593,7 +604,8 @@ def test_stats_shape_is_json_and_complete():
     assert set(s) == {"mode", "phase", "http_url", "uptime_s", "actors_total", "tables", "demo_in_buffer",
                       "demo_share_buffer", "demo_share_recent_samples",
                       "sampled_rows", "sampled_demo_rows", "requests", "rejected", "dropped", "actors", "rates",
-                      "rate_limiter", "checkpoint", "sampler", "obs_shape", "obs_dtype", "n_actions"}
+                      "rate_limiter", "checkpoint", "wal", "sampler", "obs_shape", "obs_dtype", "n_actions"}
+    assert s["wal"] == {"mode": "off"}  # a bare core has no write-ahead log (the server gives it one)
     assert s["tables"]["online"] == {"size": 300, "capacity": 900, "inserted": 300, "bytes": core.online.nbytes}
     assert s["tables"]["demo"]["sha256"] == "d" * 64
     # stats travel as a JSON message: it must encode and decode unchanged

@@ -56,9 +56,10 @@ class Actor:
         return msg, obs, nxt
 
 
-def run(core: ReplayCore, batches: int, rows: int = 25, n_step: int = 1) -> dict[int, tuple[np.ndarray, np.ndarray]]:
-    """Two interleaved actors; returns what was sent, by item key."""
-    actors = [Actor("w0", 1, n_step), Actor("w1", 2, n_step)]
+def run(core: ReplayCore, batches: int, rows: int = 25, n_step: int = 1,
+        names: tuple[str, str] = ("w0", "w1")) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """Two interleaved actors (each numbering its batches from seq 0); returns what was sent, by item key."""
+    actors = [Actor(names[0], 1, n_step), Actor(names[1], 2, n_step)]
     sent: dict[int, tuple[np.ndarray, np.ndarray]] = {}
     for b in range(batches):
         msg, obs, nxt = actors[b % 2].batch(rows)
@@ -127,7 +128,7 @@ def test_checkpoint_round_trip_keeps_every_item_and_its_frames(tmp_path):
     old_keys = np.arange(core.online.tail, core.online.inserted)
     renumbered = {new: sent[int(old)] for new, old in enumerate(old_keys)}
     check_samples(fresh, renumbered)
-    more = run(fresh, batches=4)  # it goes on inserting after a restore
+    more = run(fresh, batches=4, names=("w2", "w3"))  # it goes on inserting after a restore (w0's seq 0 is held)
     assert fresh.online.inserted == 500 and set(more) == set(range(400, 500))
 
 

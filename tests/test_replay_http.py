@@ -62,7 +62,8 @@ def tmsg(start: int, rows: int = B) -> tuple[bytes, str]:
 
 def fill(core: ReplayCore, total: int) -> None:
     for _ in range(0, total, B):
-        msg, actor = tmsg(core.online.inserted)
+        # Numbered on from the items received (stored or, in phase 1, dropped): each batch a new seq.
+        msg, actor = tmsg(core.stats()["actors_total"]["items"])
         assert core.ingest(msg, actor) is None
 
 
@@ -383,7 +384,19 @@ def test_metrics_exposition_format_and_values():
     # Before any checkpoint or ratio, those gauges are absent (their HELP / TYPE stay).
     text = client(make_core()).get("/metrics").text
     assert "\nlaneshift_replay_checkpoint_age_seconds" not in text and "TYPE laneshift_replay_checkpoint_age" in text
+    assert "\nlaneshift_replay_wal_bytes" not in text and "TYPE laneshift_replay_wal_bytes" in text  # no log
     parse_metrics(text)
+
+
+def test_metrics_of_the_write_ahead_log(tmp_path):
+    from laneshift.replay_server.wal import WriteAheadLog
+
+    core = make_core()
+    core.wal = WriteAheadLog(tmp_path / "wal", "write", {}, 0, first_gen=1)
+    core.wal.write_transitions("w0", b"x" * 100)
+    m = parse_metrics(client(core).get("/metrics").text)
+    assert m[("laneshift_replay_wal_records_total", ())] == 1 and m[("laneshift_replay_wal_failures_total", ())] == 0
+    assert m[("laneshift_replay_wal_bytes", ())] > 100
 
 
 def test_metrics_sample_latency_histogram():

@@ -22,6 +22,11 @@ Measured:
 
     laneshift bench replay                      # text
     laneshift bench replay --duration 5 --json  # one JSON object
+    laneshift bench replay --set replay.wal=off --work-dir /data/bench   # the server without its write-ahead log
+
+The replay servers run with the config's defaults (the write-ahead log on: ``replay.wal``) except
+what the bench sets (no periodic checkpoint, no restore) and ``--set`` (applied last); their run
+dirs (the log's segments) go under ``--work-dir``, so put it on the disk the runs use.
 
 The pieces: this module (the command and the measurements), ``replay_publisher`` (a synthetic-actor
 process), ``replay_harness`` (synthetic messages, timing; shared with ``bench shards``),
@@ -46,7 +51,8 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from laneshift import transport, wire
-from laneshift.config import ReplayConfig, TransportConfig
+from laneshift.argtypes import parse_set
+from laneshift.config import ConfigError, ReplayConfig, TransportConfig, load_run_config
 from laneshift.progress import progress
 from laneshift.progress import write as progress_write
 
@@ -96,6 +102,11 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-grayscale", dest="grayscale", action="store_false",
                    help="vector runs only (at --batch 1024 a grayscale message is 80 MB)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+    p.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
+                   help="a config field for the replay servers, applied after the bench's own, e.g. "
+                        "--set replay.wal=off (repeatable)")
+    p.add_argument("--work-dir", default=None,
+                   help="where the servers' run dirs (and write-ahead logs) go (default: a new temp dir, removed after)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -105,6 +116,10 @@ def run(args: argparse.Namespace) -> int:
         raise SystemExit(f"--batch must be 1..{wire.MAX_BATCH_ROWS} and --publishers >= 1")
     if min(args.capacity_vector, args.capacity_grayscale) < SAMPLE_BATCH:
         raise SystemExit(f"capacities must be >= {SAMPLE_BATCH}")
+    try:
+        load_run_config(overrides=parse_set(args.set))  # a bad --set: refused here, not in a child
+    except ConfigError as exc:
+        raise SystemExit(f"bench replay: {exc}") from None
     log = sys.stderr if args.json else sys.stdout
     try:
         result = bench(args, log=log)
@@ -133,6 +148,7 @@ class _Bench:
 
         self.args = args
         self.work = work
+        self.overrides = parse_set(getattr(args, "set", None) or [])  # --set, for the replay servers
         self.log = log
         self.endpoint = f"tcp/127.0.0.1:{transport.free_tcp_port()}"
         self.group = ProcessGroup(work / "logs")
@@ -154,7 +170,7 @@ class _Bench:
         wait_for_router(self.endpoint, self.check_alive)
 
     def start_server(self, name: str, observation: str, capacity: int) -> wire.TransitionSchema:
-        from laneshift.config import load_run_config, save_run_config
+        from laneshift.config import save_run_config
         from laneshift.deploy.processes import ChildFailed, wait_for_file
         from laneshift.actors.envs import spec_of
 
@@ -167,6 +183,7 @@ class _Bench:
             overrides["replay.checkpoint_every_s"] = 0  # no periodic table checkpoint inside a window
         if "restore" in fields:
             overrides["replay.restore"] = False
+        overrides.update(self.overrides)
         cfg = load_run_config(overrides=overrides)
         path = save_run_config(cfg, self.work / f"{name}.yaml")
         ready = self.work / f"{name}.ready"
@@ -402,7 +419,10 @@ def _zenoh_version() -> str:
 
 def bench(args: argparse.Namespace, log: TextIO = sys.stderr) -> dict:
     """Run every measurement; returns the result dict (see ``format_result``)."""
-    work = Path(tempfile.mkdtemp(prefix="lsbench-replay-"))
+    base = getattr(args, "work_dir", None)
+    if base:
+        Path(base).mkdir(parents=True, exist_ok=True)
+    work = Path(tempfile.mkdtemp(prefix="lsbench-replay-", dir=base))
     b = _Bench(args, work, log)
     ok = False
     started = time.monotonic()
@@ -424,7 +444,7 @@ def bench(args: argparse.Namespace, log: TextIO = sys.stderr) -> dict:
             "config": {"duration_s": args.duration, "warmup_s": args.warmup, "batch": args.batch,
                        "publisher_processes": args.publishers, "sample_batch": SAMPLE_BATCH,
                        "capacity_vector": args.capacity_vector, "capacity_grayscale": args.capacity_grayscale,
-                       "paced_rate": args.paced_rate,
+                       "paced_rate": args.paced_rate, "replay_set": b.overrides, "work_dir": str(work.parent),
                        "topology": "router process + replay-server client process + publisher client processes",
                        "zenoh": _zenoh_version(), "cpus": os.cpu_count()},
             "targets": {"ingest_vector_per_s": TARGET_INGEST_VECTOR_PER_S, "sample_p99_ms": TARGET_SAMPLE_P99_MS},

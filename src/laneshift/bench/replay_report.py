@@ -35,6 +35,8 @@ def format_result(r: dict) -> str:
     vs, gs = "x".join(map(str, r["vector_obs"]["shape"])), "x".join(map(str, r["grayscale_obs"]["shape"]))
     lines = [
         f"replay bench: {cfg['topology']}; zenoh {cfg['zenoh']}, {cfg['cpus']} cpus, loopback",
+        f"  replay servers: config defaults" + "".join(f", {k}={v}" for k, v in (cfg.get("replay_set") or {}).items())
+        + f"; run dirs under {cfg.get('work_dir', '?')}",
         f"  {cfg['duration_s']:g} s per window after {cfg['warmup_s']:g} s warm-up, {cfg['batch']} transitions per "
         f"message, actors spread over {cfg['publisher_processes']} publisher processes, CongestionControl.BLOCK",
         "",

@@ -36,6 +36,9 @@ class CountingLinks:
     def send_episode(self, record: wire.EpisodeRecord) -> None:
         self.episodes += 1
 
+    def flush(self) -> bool:
+        return True
+
     def latest_weights(self) -> bytes | None:
         w, self._weights = self._weights, None
         return w

@@ -88,6 +88,8 @@ def _coerce(where: str, typ: Any, value: Any) -> Any:
             return str(value)
         raise ConfigError(f"{where}: must be a string, got {value!r}")
     if origin is Literal:  # a choice: the section's __post_init__ names the choices if it is none of them
+        if value is False and "off" in typing.get_args(typ):  # YAML 1.1 reads a bare `off` as false
+            return "off"
         return value if isinstance(value, str) else _coerce(where, str, value)
     raise ConfigError(f"{where}: unsupported type {typ}")
 

@@ -183,9 +183,19 @@ class ReplayConfig:
     priority_eps: float = 1e-3  # added to |TD error| so no item starves
     demo_priority_bonus: float = 1.0  # DQfD's epsilon_d: extra priority for demo items
     # Online-table checkpoints in <run dir>/replay_checkpoint, written without blocking inserts or
-    # samples; kill -9 loses at most about one interval of agent experience. 0 = only at shutdown.
+    # samples; they bound the write-ahead log (wal) and are what survives host loss. With wal off a
+    # kill -9 loses about one interval of agent experience (counted). 0 = only at shutdown.
     checkpoint_every_s: float = 60.0
-    restore: bool = True  # restore the online table from the run dir's checkpoint at start
+    # Write-ahead log in <run dir>/replay_checkpoint.wal: each accepted batch is written there
+    # before it is stored, and replayed after the checkpoint at a restart, so a kill -9 of the
+    # server loses only batches not yet received (docs/RELIABILITY.md). write: each batch reaches
+    # the OS (survives the process, not the host); fsync: also on disk (host loss; slower); off:
+    # none (a kill -9 loses what arrived since the last checkpoint, counted).
+    wal: Literal["off", "write", "fsync"] = "write"
+    # The log's bound: past this many MiB since the last checkpoint a checkpoint starts at once
+    # (also with checkpoint_every_s 0), after which the log is cut back. 0 = no bound.
+    wal_max_mb: float = 1024.0
+    restore: bool = True  # restore the online table from the run dir's checkpoint (and log) at start
     http_port: int = -1  # HTTP inspection API: -1 off, 0 a free port, else that port
     http_host: str = "127.0.0.1"  # bind elsewhere only on purpose: the API has no authentication
     # Per-actor state is bounded (4,096 actors); a new actor beyond that evicts the actor idle
@@ -210,6 +220,7 @@ class ReplayConfig:
         _check(-1 <= self.http_port <= 65535, "replay.http_port", "must be -1 (off), 0 (any free port) or a port",
                self.http_port)
         _check(self.checkpoint_every_s >= 0, "replay.checkpoint_every_s", "must be >= 0", self.checkpoint_every_s)
+        _check(self.wal_max_mb >= 0, "replay.wal_max_mb", "must be >= 0 (0 = no bound)", self.wal_max_mb)
         _check(self.actor_idle_evict_s >= 0, "replay.actor_idle_evict_s", "must be >= 0", self.actor_idle_evict_s)
         _check(self.capacity >= 2, "replay.capacity", "must be >= 2", self.capacity)
         _check(0.0 < self.demo_ratio < 1.0, "replay.demo_ratio", "must be in (0, 1)", self.demo_ratio)
