@@ -225,7 +225,7 @@ class LearnerActor(_Service):
         import torch
 
         from laneshift import transport
-        from laneshift.learner.loop import tune_learner_process
+        from laneshift.learner.process import tune_learner_process
 
         cfg = self._begin(plain)
         torch.set_num_threads(cfg.learner.torch_threads)
@@ -243,11 +243,16 @@ class LearnerActor(_Service):
 
     def run(self) -> dict:
         self.learner.run()  # returns on stop(), a stop message, or the stop criterion
-        return {**self.learner.last_status, "restored_from": self.learner.restored_from,
+        return {**self._last_status(), "restored_from": self.learner.restored_from,
                 "checkpoint_failures": self.learner.checkpoint_failures, "device": str(self.learner.agent.device)}
 
     def status(self) -> dict:
-        return {**self.learner.last_status, "checkpoint_failures": self.learner.checkpoint_failures}
+        return {**self._last_status(), "checkpoint_failures": self.learner.checkpoint_failures}
+
+    def _last_status(self) -> dict[str, Any]:
+        """The learner's status of its newest log interval as the launcher reads it ({} before the first)."""
+        status = self.learner.last_status
+        return status.to_dict() if status is not None else {}
 
     def stop(self) -> None:
         self.stop_event.set()

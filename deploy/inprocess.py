@@ -92,8 +92,8 @@ class InProcessReplay:
         batch = self.sample(req)
         return lambda: batch
 
-    def send_priorities(self, payload: bytes) -> None:
-        self.core.handle_priorities(payload)
+    def send_priorities(self, update: wire.PriorityUpdate) -> None:
+        self.core.handle_priorities(wire.encode_priorities(update))  # the core takes the message as sent
 
     def replay_stats(self) -> dict | None:
         return self.core.stats()

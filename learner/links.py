@@ -74,8 +74,8 @@ class ZenohReplayShard:
                                                wire.encode_json(body), self.timeout))
         return _json_or_none(reply)
 
-    def send_priorities(self, payload: bytes) -> None:
-        self._priorities.put(payload)
+    def send_priorities(self, update: wire.PriorityUpdate) -> None:
+        self._priorities.put(wire.encode_priorities(update))  # the one place a priority update is encoded
 
 
 class ZenohLearnerLinks(ReplayThrough):

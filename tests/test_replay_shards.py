@@ -162,8 +162,8 @@ def test_priority_updates_go_back_to_the_shard_each_row_came_from():
     cs = cores(2, [300, 300], sampler="prioritized")
     replay = sharded(cs)
     batch = replay.sample(SampleRequest(128))
-    replay.send_priorities(wire.encode_priorities(wire.PriorityUpdate(
-        index=batch.index, is_demo=batch.is_demo, priority=np.full(len(batch.index), 7.0, np.float32))))
+    replay.send_priorities(wire.PriorityUpdate(
+        index=batch.index, is_demo=batch.is_demo, priority=np.full(len(batch.index), 7.0, np.float32)))
     for i, core in enumerate(cs):
         mine = batch.obs[:, 1] == i
         assert core.priority_updates == 1 and core.rejected == {}

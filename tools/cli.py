@@ -203,7 +203,7 @@ def _replay_server(args: argparse.Namespace) -> int:
 
 def _learner(args: argparse.Namespace) -> int:
     from laneshift.deploy.builder import Builder
-    from laneshift.learner.loop import run_learner
+    from laneshift.learner.process import run_learner
 
     builder = Builder(_config_from(args))  # the env's spec and the periodic greedy evaluation
     return _end_service_process(run_learner(builder.cfg, builder.spec, builder.greedy_evaluation()))

@@ -6,7 +6,7 @@ Two implementations of one Double DQN update are timed side by side, alternating
 - **DoubleDQN.update** (``learner/dqn.py``): the learner's own update, fed exactly as the learner
   feeds it: a ``wire.SampledBatch`` of ``learner.prefetch`` batches, encoded and decoded through the
   wire (``wire.encode_batch`` / ``wire.decode_batch``, once, outside the timing) and split per update
-  with the learner loop's ``_split``; numpy in, so every update turns its batch into tensors (shared
+  with the learner loop's ``split_updates``; numpy in, so every update turns its batch into tensors (shared
   on CPU, copied to a GPU) and computes its metrics and |TD error|; like the learner loop, it reads
   none of them back per update (the loop reads the metrics once per log interval, and the |TD
   errors| once per sample reply only from a prioritized replay; this batch is uniform).
@@ -125,14 +125,10 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _split(batch: wire.SampledBatch) -> list[dict[str, np.ndarray]]:
-    """The learner loop's split of a SampledBatch into update batches."""
-    try:  # the learner's own (its module imports zenoh and tensorboardX)
-        from laneshift.learner.loop import _split as learner_split
-    except ImportError:  # same fields, same split: learner.loop.UPDATE_FIELDS / _split
-        fields = ("obs", "action", "reward", "next_obs", "terminated", "steps", "weight", "is_demo")
-        rows = len(batch.action) // batch.num_batches
-        return [{k: getattr(batch, k)[i * rows:(i + 1) * rows] for k in fields} for i in range(batch.num_batches)]
-    return learner_split(batch)
+    """The learner loop's split of a SampledBatch into update batches (``learner.batches``)."""
+    from laneshift.learner.batches import split_updates
+
+    return split_updates(batch)
 
 
 def sampled_batch(case: Case, num_batches: int, seed: int = 0) -> wire.SampledBatch:
