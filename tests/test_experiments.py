@@ -90,7 +90,7 @@ def test_train_method_applies_the_named_settings_under_mode_and_set(monkeypatch,
 
 def test_the_human_like_stand_in_row_runs_on_the_test_episodes_of_both_lanes():
     from laneshift.config import EnvConfig
-    from laneshift.tools.studies.experiments import HUMAN_LIKE_ROW, human_like_lanes
+    from laneshift.tools.studies.table2 import HUMAN_LIKE_ROW, human_like_lanes
 
     rows = human_like_lanes(EnvConfig(scenario="straight", max_steps=30), episodes=2, seed=100_000)
     assert set(rows) == {"random", "non-target"} and "stand-in" in HUMAN_LIKE_ROW

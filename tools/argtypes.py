@@ -1,7 +1,7 @@
 """The argparse pieces every command shares: the number types (``positive_int``,
 ``non_negative_int``, ``positive_float``, ``non_negative_float``, ``fraction``), ``comma_list``,
-``endpoint`` (a zenoh endpoint) and the ``--set SECTION.FIELD=VALUE`` option (``add_set_arg``,
-``parse_set``). A bad value is an ``argparse.ArgumentTypeError`` naming what was expected, which
+``endpoint`` (a zenoh endpoint), ``seed_list`` (the studies' ``--seeds``) and the
+``--set SECTION.FIELD=VALUE`` option (``add_set_arg``, ``parse_set``). A bad value is an ``argparse.ArgumentTypeError`` naming what was expected, which
 the parser turns into one line and exit code 2.
 
 The ``laneshift`` command (``laneshift.tools.cli``) and the sub-commands it registers (the studies, the
@@ -97,3 +97,14 @@ def add_set_arg(p: argparse.ArgumentParser) -> None:
     p.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
                    help="override any config field, e.g. --set learner.lr=1e-4 (repeatable; `laneshift config "
                         "fields TEXT` says what each field does)")
+
+
+def seed_list(text: str) -> list[int]:
+    """``--seeds``: comma-separated integers >= 0."""
+    try:
+        seeds = [int(s) for s in text.split(",") if s.strip()]
+    except ValueError:
+        seeds = []
+    if not seeds or min(seeds) < 0:
+        raise ConfigError(f"--seeds: expected comma-separated integers >= 0, got {text!r}")
+    return seeds

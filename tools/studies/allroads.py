@@ -24,7 +24,7 @@ import gymnasium as gym
 from laneshift.config import EnvConfig
 from laneshift.envspec import ALLROADS
 from laneshift.tools.studies.evaluate import INITIAL_LANES, Policy, evaluate_lanes, wilson_ci95
-from laneshift.tools.studies.experiments import across_seeds, lane_stats, pooled
+from laneshift.tools.studies.table2 import across_seeds, lane_stats, pooled
 from laneshift.tools.studies.stats import RESAMPLES
 
 #: Issue 27's target for one network on all four roads, on each road and initial lane.

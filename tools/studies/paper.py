@@ -40,8 +40,10 @@ from laneshift.config import ConfigError, load_run_config, method_settings
 from laneshift.progress import write
 from laneshift.tools.studies import protocol
 from laneshift.tools.studies.evaluate import INITIAL_LANES
-from laneshift.tools.studies.experiments import (HUMAN_LIKE_ROW, across_seeds, collect_episodes, plot_curves, seed_list,
-                                           write_episodes)
+from laneshift.tools.argtypes import seed_list
+from laneshift.tools.studies.plots import plot_curves
+from laneshift.tools.studies.runs import collect_episodes, write_episodes
+from laneshift.tools.studies.table2 import HUMAN_LIKE_ROW, across_seeds
 from laneshift.tools.studies.stats import RESAMPLES, SEED
 
 #: The study's rows: the paper's three modes and the DQfD-style one, each on the annealed learner.

@@ -8,7 +8,7 @@ network (no checkpoint is chosen) is evaluated greedily on the test episodes (ep
 100,000, never used for any choice; ``--test-episodes`` per initial-lane setting, ``--eval-max-steps``
 steps each). The scripted driver and the human-like stand-in drive the same test episodes. A learned
 rate is the mean of the per-seed rates with a 95 % percentile bootstrap interval over seeds
-(``laneshift.tools.studies.stats``, through ``experiments.across_seeds``).
+(``laneshift.tools.studies.stats``, through ``table2.across_seeds``).
 
     laneshift experiment protocol --scenario straight --method dqfd-bc --seeds 0,1,2 \\
         --env-steps 600000 --publish results/checkpoints
@@ -54,8 +54,10 @@ from laneshift.config import METHODS, ConfigError, EnvConfig, RunConfig, load_ru
 from laneshift.progress import progress, write
 from laneshift.tools.studies import allroads
 from laneshift.tools.studies.evaluate import INITIAL_LANES, evaluate_lanes, load_greedy_policy
-from laneshift.tools.studies.experiments import (HUMAN_LIKE_ROW, across_seeds, human_like_lanes, lane_stats, method_config,
-                                           metrics_records, plot_eval_curves, pooled, seed_list, train_logged)
+from laneshift.tools.argtypes import seed_list
+from laneshift.tools.studies.plots import plot_eval_curves
+from laneshift.tools.studies.runs import method_config, metrics_records, train_logged
+from laneshift.tools.studies.table2 import HUMAN_LIKE_ROW, across_seeds, human_like_lanes, lane_stats, pooled
 from laneshift.tools.studies.stats import RESAMPLES
 
 #: The test episodes: episode i of each initial-lane setting is reset with seed TEST_SEED + i.
@@ -448,7 +450,7 @@ def validation_table(results: dict) -> list[str]:
 
 def plot_validation(results: dict, out_dir: Path) -> Path | None:
     """``curves_validation.png``: validation survival and achievement against env steps, the mean
-    over seeds with a 95 % bootstrap band over seeds (``experiments.plot_eval_curves``); None when
+    over seeds with a 95 % bootstrap band over seeds (``plots.plot_eval_curves``); None when
     no seed has two validation evaluations."""
     method = results["method"]
     runs = results["methods"][method]["runs"]

@@ -44,7 +44,7 @@ def preset_overrides(preset: int) -> dict[str, Any]:
 
 def run_presets(args: argparse.Namespace) -> dict:
     from laneshift.tools.studies.evaluate import evaluate_checkpoint
-    from laneshift.tools.studies.experiments import _episode_curves, train_logged
+    from laneshift.tools.studies.runs import episode_curves, train_logged
 
     out_dir = Path(args.out).resolve()
     scenarios = [s.strip() for s in args.scenarios.split(",") if s.strip()]
@@ -73,7 +73,7 @@ def run_presets(args: argparse.Namespace) -> dict:
             cfg = configs[name]
             started = time.monotonic()
             train_logged(cfg, out_dir / f"{name}.log", label=f"train {name}")
-            _, returns, lengths = _episode_curves(str(run_dir))
+            _, returns, lengths = episode_curves(str(run_dir))
             returns_by_run[name] = returns
             ev = evaluate_checkpoint(run_dir / "checkpoints" / "final.safetensors", cfg.env,
                                      episodes=args.eval_episodes, seed=100_000, progress=f"eval {name}")
@@ -114,14 +114,14 @@ def plot(returns_by_run: dict[str, np.ndarray], scenarios: list[str], presets: l
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from laneshift.tools.studies.experiments import _moving_average
+    from laneshift.tools.studies.plots import moving_average
 
     fig, axes = plt.subplots(1, len(scenarios), figsize=(5 * len(scenarios), 4), squeeze=False)
     for ax, scenario in zip(axes[0], scenarios):
         for preset in presets:
             returns = returns_by_run.get(f"{scenario}-p{preset}")
             if returns is not None and len(returns):
-                ma = _moving_average(returns, window)
+                ma = moving_average(returns, window)
                 ax.plot(np.arange(len(returns))[-len(ma):], ma, label=f"condition {preset}", color=f"C{preset - 1}")
         ax.set_title(scenario)
         ax.set_xlabel("episodes")
