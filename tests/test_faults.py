@@ -90,7 +90,7 @@ def test_router_killed_comes_back_on_the_same_endpoint(tmp_path):
 
 
 def test_replay_server_killed_before_its_first_checkpoint_counts_every_loss(tmp_path):
-    """No checkpoint to restore: what it had stored is lost, and counted (it used to read 0 lost)."""
+    """No checkpoint to restore: what it had stored is lost, and counted as lost (not read as 0 lost)."""
     run_dir, summary, replay, text = run_with_fault(tmp_path, "replay-server", at_steps=1500,
                                                     **{"replay.checkpoint_every_s": 0})
     assert summary["replay"]["lost_items"] >= 1000, summary["replay"]

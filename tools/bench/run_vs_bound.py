@@ -1,6 +1,6 @@
 """``laneshift bench run-vs-bound``: a whole run's env steps/s against the bound its learner allows
-(the figure ``bench all`` reports as ``p1_*``, after target P1 of docs/performance.md: at least 0.9
-of the bound). Its old name, ``bench p1``, still runs it (hidden from the command list) and says the
+(the figure ``bench all`` reports as ``p1_*``; the target is at least 0.9 of the bound,
+docs/performance.md). Its old name, ``bench p1``, still runs it (hidden from the command list) and says the
 new one.
 
 At replay ratio R (``replay.samples_per_insert``) and batch B, a run can make at most
@@ -109,7 +109,7 @@ def run_vs_bound_main(args: argparse.Namespace) -> int:
     return 0 if all("error" not in r for r in result["rounds"]) else 1
 
 
-#: The command's name before it said what it measures (P1 is the target's label, not the measurement).
+#: The command's name before it said what it measures (``p1`` is the prefix of the figure's keys, not the measurement).
 OLD_NAME = "p1"
 
 

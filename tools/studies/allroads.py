@@ -7,8 +7,8 @@ the networks trained on that road alone, and the scripted driver and the human-l
 the same episodes per road. ``merge_evals`` pools the four roads into the protocol's usual
 per-initial-lane numbers (``results.json``'s ``methods`` and ``baselines``, which ``experiment
 replot`` reads); ``road_results`` and ``render_road_table`` give the numbers and the table per road
-and initial lane, with the target of issue 27 (``TARGET``: >= 95 % survival and >= 90 %
-achievement on each road).
+and initial lane, with the target one network on all four roads is held to (``TARGET``: >= 95 %
+survival and >= 90 % achievement on each road).
 
 Room: the tools (studies). May import: anything in laneshift but ``laneshift.tools.studies.protocol``
 (which imports this module).
@@ -27,7 +27,7 @@ from laneshift.tools.studies.evaluate import INITIAL_LANES, Policy, evaluate_lan
 from laneshift.tools.studies.table2 import across_seeds, lane_stats, pooled
 from laneshift.tools.studies.stats import RESAMPLES
 
-#: Issue 27's target for one network on all four roads, on each road and initial lane.
+#: The target for one network on all four roads, on each road and initial lane (docs/environments.md).
 TARGET = {"survival": 0.95, "achievement": 0.90}
 #: The pooled rows' name in the table.
 ALL_FOUR = "all four"
