@@ -98,8 +98,9 @@ class InProcessReplay:
     def replay_stats(self) -> dict | None:
         return self.core.stats()
 
-    def replay_control(self, body: dict) -> dict | None:
-        return self.core.handle_control(body)
+    def set_phase(self, phase: int) -> bool:
+        reply = self.core.handle_control({"cmd": "set_phase", "phase": phase})
+        return bool(reply and reply.get("ok"))
 
 
 class InProcessLearnerLinks(ReplayThrough):

@@ -264,7 +264,7 @@ class Learner:
               flush=True)
 
     def _set_replay_phase(self, phase: int) -> bool:
-        while (reply := self.links.replay_control({"cmd": "set_phase", "phase": phase})) is None or not reply.get("ok"):
+        while not self.links.set_phase(phase):
             if self.stop.wait(0.2):
                 return False
         return True

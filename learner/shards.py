@@ -175,17 +175,9 @@ class ShardedReplay:
                                           "partial_requests": self.partial_requests}
         return merged
 
-    def replay_control(self, body: dict) -> dict | None:
-        """A command to every shard (``set_phase``, ``stats``): ok only when every shard says so."""
-        replies = list(self._pool.map(lambda s: s.replay_control(body), self.shards))
-        if any(r is None for r in replies):
-            return None
-        failed = [r for r in replies if not r.get("ok")]
-        if failed:
-            return failed[0]
-        if body.get("cmd") == "stats":
-            return {"ok": True, "stats": merge_replay_stats([r["stats"] for r in replies])}
-        return replies[0]
+    def set_phase(self, phase: int) -> bool:
+        """Every shard to ``phase``: True only when every shard took it."""
+        return all(list(self._pool.map(lambda s: s.set_phase(phase), self.shards)))
 
     def close(self) -> None:
         self._pool.shutdown(wait=False, cancel_futures=True)

@@ -199,9 +199,9 @@ def test_sync_requests_need_every_shard_and_ask_each_for_its_own_workers():
 def test_control_and_stats_reach_every_shard():
     cs = cores(2, [120, 80], demo_mode="rehearsal")
     replay = sharded(cs)
-    assert replay.replay_control({"cmd": "set_phase", "phase": 2})["ok"]
+    assert replay.set_phase(2) is True
     assert [c.phase for c in cs] == [2, 2]
-    assert replay.replay_control({"cmd": "set_phase", "phase": 1})["ok"] is False  # phases only move forward
+    assert replay.set_phase(1) is False  # phases only move forward
     stats = replay.replay_stats()
     assert stats["tables"]["online"]["inserted"] == 0  # rehearsal's phase 1 stored nothing: it was phase 1
     assert stats["actors_total"]["count"] == 2 and stats["actors_total"]["items"] == 200

@@ -62,8 +62,8 @@ class FakeLinks:
                 "rates": {"inserts_per_s": 10.0, "samples_per_s": 80.0}, "demo_share_buffer": 0.0,
                 "demo_share_recent_samples": 0.0, "sampled_rows": self.sampled}
 
-    def replay_control(self, body: dict) -> dict:
-        return {"ok": True}
+    def set_phase(self, phase: int) -> bool:
+        return True
 
     def publish_weights(self, payload: bytes) -> None:
         pass
