@@ -60,7 +60,7 @@ $(RLLIB_STAMP): pyproject.toml
 	@touch $(RLLIB_STAMP)
 
 bench-rllib: $(RLLIB_STAMP)
-	@$(RLLIB_PY) benchmarks/rllib_dqn.py $(RLLIB_ARGS)
+	@$(RLLIB_PY) tools/bench/scripts/rllib_dqn.py $(RLLIB_ARGS)
 
 # The replay peer (docs/replay-bench.md): DeepMind Reverb 0.14, the replay service Acme uses, under
 # laneshift's replay benchmark's load. Its own venv: Reverb links TensorFlow 2.15, which needs numpy<2.
@@ -80,4 +80,4 @@ $(REVERB_STAMP):
 	@touch $(REVERB_STAMP)
 
 bench-reverb: $(REVERB_STAMP)
-	@TF_CPP_MIN_LOG_LEVEL=2 $(REVERB_PY) benchmarks/reverb_replay.py $(REVERB_ARGS)
+	@TF_CPP_MIN_LOG_LEVEL=2 $(REVERB_PY) tools/bench/scripts/reverb_replay.py $(REVERB_ARGS)

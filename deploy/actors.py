@@ -100,7 +100,7 @@ def _never_hang_at_exit() -> None:
     joins those threads for ever: a learner actor was found two hours later, orphaned, its main
     thread in ``threading._shutdown``. By then the component has written everything it keeps
     (checkpoints are written by its own loops and at stop), so flushing the log streams and
-    ``os._exit`` lose nothing; it is what ``laneshift.cli`` does for the service processes.
+    ``os._exit`` lose nothing; it is what ``laneshift.tools.cli`` does for the service processes.
     ``threading._register_atexit`` runs before that join (there is no public hook that does)."""
 
     def leave() -> None:
@@ -225,7 +225,7 @@ class LearnerActor(_Service):
         import torch
 
         from laneshift import transport
-        from laneshift.learner.loop import tune_learner_process
+        from laneshift.learner.process import tune_learner_process
 
         cfg = self._begin(plain)
         torch.set_num_threads(cfg.learner.torch_threads)
@@ -243,11 +243,16 @@ class LearnerActor(_Service):
 
     def run(self) -> dict:
         self.learner.run()  # returns on stop(), a stop message, or the stop criterion
-        return {**self.learner.last_status, "restored_from": self.learner.restored_from,
+        return {**self._last_status(), "restored_from": self.learner.restored_from,
                 "checkpoint_failures": self.learner.checkpoint_failures, "device": str(self.learner.agent.device)}
 
     def status(self) -> dict:
-        return {**self.learner.last_status, "checkpoint_failures": self.learner.checkpoint_failures}
+        return {**self._last_status(), "checkpoint_failures": self.learner.checkpoint_failures}
+
+    def _last_status(self) -> dict[str, Any]:
+        """The learner's status of its newest log interval as the launcher reads it ({} before the first)."""
+        status = self.learner.last_status
+        return status.to_dict() if status is not None else {}
 
     def stop(self) -> None:
         self.stop_event.set()

@@ -10,7 +10,7 @@ the in-process test mode all build through it and differ only in *where* each co
 
 Room: deploy. May import: the contract (``laneshift.config``, ``wire``, ``envspec``,
 ``transport``) and the components it builds (that is its job); nothing imports it but ``deploy``
-and the commands that start one component (``laneshift.cli``).
+and the commands that start one component (``laneshift.tools.cli``).
 """
 
 from __future__ import annotations

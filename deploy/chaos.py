@@ -611,7 +611,7 @@ def chaos_main(args: argparse.Namespace) -> int:
     work = Path(args.work_dir).resolve()
     demos = None
     if args.demos:
-        from laneshift.demos.generate import generate_shard
+        from laneshift.tools.demos.generate import generate_shard
 
         shard = work / "demos"
         demos = str(shard) if any(shard.glob("**/metadata.json")) else \

@@ -95,14 +95,15 @@ class InProcessReplay:
         batch = self.sample(req)
         return lambda: batch
 
-    def send_priorities(self, payload: bytes) -> None:
-        self.core.handle_priorities(payload)
+    def send_priorities(self, update: wire.PriorityUpdate) -> None:
+        self.core.handle_priorities(wire.encode_priorities(update))  # the core takes the message as sent
 
     def replay_stats(self) -> dict | None:
         return self.core.stats()
 
-    def replay_control(self, body: dict) -> dict | None:
-        return self.core.handle_control(body)
+    def set_phase(self, phase: int) -> bool:
+        reply = self.core.handle_control({"cmd": "set_phase", "phase": phase})
+        return bool(reply and reply.get("ok"))
 
 
 class InProcessLearnerLinks(ReplayThrough):

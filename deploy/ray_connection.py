@@ -127,7 +127,7 @@ class RayConnection:
         if not self.address.startswith("ray://"):
             _probe_gcs(self.address)
         try:
-            ray.init(address=self.address, log_to_driver=False, configure_logging=False)
+            _join(ray.init, self.address)
         except Exception as exc:  # noqa: BLE001 - Ray raises many kinds; the user needs one line
             raise LaunchError(_ray_connect_error(self.address, exc)) from None
         return self
@@ -145,6 +145,32 @@ class RayConnection:
                 self._reaper.wait(5)
             except subprocess.TimeoutExpired:
                 self._reaper.kill()
+
+
+#: What Ray Client's proxy on the head answers when the server process it starts for this driver
+#: (its "specific server") died at once (ray/util/client/server/proxier.py). Seen on a loaded
+#: machine: the proxy is a multi-threaded gRPC process, and between fork and exec the child's gRPC
+#: event engine failed (its log: ``epoll_wait error: Bad file descriptor``; the kernel's:
+#: ``event_engine[...]: segfault ... in cygrpc``); the next process the proxy started ran.
+CLIENT_SERVER_FAILED = "Starting Ray client server failed"
+#: ``ray://`` connections tried when the head's client server fails to start (each try starts a new one).
+CLIENT_TRIES = 3
+
+
+def _join(init: Any, address: str, tries: int = CLIENT_TRIES, out: Any = None) -> None:
+    """``init(address=...)`` (``ray.init``); through Ray Client (``ray://``), again up to ``tries``
+    times in all while the head says its client server failed to start, a line on ``out`` each time.
+    Any other failure is raised at once."""
+    for attempt in range(1, tries + 1):
+        try:
+            init(address=address, log_to_driver=False, configure_logging=False)
+            return
+        except Exception as exc:  # noqa: BLE001 - Ray raises many kinds
+            if not (address.startswith("ray://") and CLIENT_SERVER_FAILED in str(exc)) or attempt == tries:
+                raise
+            print(f"Ray Client at {address}: the head's client server for this driver failed to start "
+                  f"(try {attempt} of {tries}); connecting again", file=out or sys.stderr, flush=True)
+            time.sleep(1.0)
 
 
 def _probe_gcs(address: str) -> None:

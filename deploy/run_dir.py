@@ -110,7 +110,7 @@ def ensure_demo_shard(cfg: RunConfig, out: TextIO) -> RunConfig:
     episodes = _default_demo_episodes(cfg)
     path = default_demo_dir(cfg, episodes)
     if not any(path.glob("**/metadata.json")):
-        from laneshift.demos.generate import generate_shard
+        from laneshift.tools.demos.generate import generate_shard
 
         print(f"train: generating the default demo shard ({episodes} scripted episodes) in {path}", file=out, flush=True)
         generate_shard(path, env_id_or_scenario=cfg.env.scenario, env_kwargs=cfg.env.env_kwargs(),

@@ -69,13 +69,14 @@ class ZenohReplayShard:
                                                self.timeout))
         return _json_or_none(reply)
 
-    def replay_control(self, body: dict) -> dict | None:
+    def set_phase(self, phase: int) -> bool:
         reply = self._answered(transport.query(self.session, wire.replay_control_key(self.namespace),
-                                               wire.encode_json(body), self.timeout))
-        return _json_or_none(reply)
+                                               wire.encode_json({"cmd": "set_phase", "phase": phase}), self.timeout))
+        body = _json_or_none(reply)
+        return bool(body and body.get("ok"))
 
-    def send_priorities(self, payload: bytes) -> None:
-        self._priorities.put(payload)
+    def send_priorities(self, update: wire.PriorityUpdate) -> None:
+        self._priorities.put(wire.encode_priorities(update))  # the one place a priority update is encoded
 
 
 class ZenohLearnerLinks(ReplayThrough):

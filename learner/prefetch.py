@@ -7,8 +7,8 @@ system, the learner waited 18 % of its time on sample replies (``learner_sample_
 requests on a thread of their own, one request ahead of the updates (``depth`` replies queued):
 zenoh's query and numpy's decode release the GIL, so the round trip overlaps torch's update.
 
-A refusal (rate limiter, not ready) or no answer is waited out on the thread, as long as the
-replay server asked (``retry_after_ms``, else 0.1 s), so the updates never wait twice. At the end of
+A refusal (rate limiter, not ready) or no answer is waited out on the thread
+(``batches.retry_delay``), so the updates never wait twice. At the end of
 a run the replies taken but not trained on are counted (``unused_rows``): they were sampled (the
 replay server counted them) but made no update.
 
@@ -23,7 +23,7 @@ from typing import Callable
 
 from laneshift import wire
 
-Sample = Callable[[wire.SampleRequest], "wire.SampledBatch | wire.WireError | None"]
+from .batches import Sample, sample_or_wait
 
 
 class Prefetcher:
@@ -44,11 +44,9 @@ class Prefetcher:
 
     def _loop(self) -> None:
         while not self._done():
-            result = self._sample(self._request())
-            if not isinstance(result, wire.SampledBatch):
+            result = sample_or_wait(self._sample, self._request(), self._closed.wait)
+            if result is None:
                 self.refusals += 1
-                delay = getattr(result, "retry_after_ms", 0) / 1000 if result is not None else 0.1
-                self._closed.wait(max(delay, 0.001))
                 continue
             while True:
                 if self._done():

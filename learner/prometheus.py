@@ -5,18 +5,22 @@ status into metrics at scrape time (so a scrape costs the learner nothing betwee
 the process collector, served by ``prometheus_client``'s own HTTP server on a thread. Counts that
 only grow (updates, env steps, episodes) are counters (``_total``); the rest are gauges, with units
 in their names. On with ``learner.metrics_port`` (-1 off, 0 a free port); local runs turn it on.
-Room: learner (component). May import: prometheus_client and the standard library (no laneshift component).
+Room: learner (component). May import: prometheus_client, the standard library and ``learner.status``
+(no other component).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import threading
-from typing import Any, Iterator
+from typing import Iterator
 
 from prometheus_client import CollectorRegistry, ProcessCollector, start_http_server
 from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily
 
-#: status key -> (metric name, help); counters only grow over a run (resumes included).
+from .status import LearnerStatus
+
+#: LearnerStatus field -> (metric name, help); counters only grow over a run (resumes included).
 COUNTERS = {"updates": ("laneshift_learner_updates_total", "gradient updates made"),
             "env_steps": ("laneshift_learner_env_steps_total", "env steps the run has made (the TensorBoard step)"),
             "episodes": ("laneshift_learner_episodes_total", "episodes the workers reported"),
@@ -40,21 +44,21 @@ GAUGES = {"loss": ("laneshift_learner_loss", "TD loss of the newest update"),
 
 class _StatusCollector:
     def __init__(self) -> None:
-        self.status: dict[str, Any] = {}
+        self.status: LearnerStatus | None = None
         self.lock = threading.Lock()
 
     def collect(self) -> Iterator:
         with self.lock:
-            status = dict(self.status)
+            status = self.status
         for key, (name, help_text) in COUNTERS.items():
-            if isinstance(status.get(key), (int, float)):
-                yield CounterMetricFamily(name.removesuffix("_total"), help_text, value=float(status[key]))
+            if isinstance(value := getattr(status, key, None), (int, float)):
+                yield CounterMetricFamily(name.removesuffix("_total"), help_text, value=float(value))
         for key, (name, help_text) in GAUGES.items():
-            if isinstance(status.get(key), (int, float)):
-                yield GaugeMetricFamily(name, help_text, value=float(status[key]))
+            if isinstance(value := getattr(status, key, None), (int, float)):
+                yield GaugeMetricFamily(name, help_text, value=float(value))
         lag = GaugeMetricFamily("laneshift_learner_version_lag", "weights versions each worker's newest episode was behind",
                                 labels=["worker"])
-        for worker, value in sorted((status.get("version_lag") or {}).items())[:64]:  # bounded, whatever the workers
+        for worker, value in sorted((status.version_lag if status else {}).items())[:64]:  # bounded, whatever the workers
             lag.add_metric([str(worker)], float(value))
         yield lag
 
@@ -70,7 +74,10 @@ class LearnerMetricsServer:
         self._server, self._thread = start_http_server(port, addr=host, registry=self.registry)
         self.port = int(self._server.server_port)
 
-    def update(self, status: dict[str, Any]) -> None:
+    def update(self, status: LearnerStatus, env_steps: int) -> None:
+        """The newest status; ``env_steps``: the run's env steps as the learner counts them (the
+        TensorBoard step), in place of the status's, which is the replay server's count."""
+        status = dataclasses.replace(status, env_steps=env_steps)
         with self._status.lock:
             self._status.status = status
 

@@ -3,7 +3,8 @@ in-process alike. Types only (and one forwarding helper); the zenoh adapters are
 the sharded replay in ``shards``, and both import this module.
 
 - ``ReplayClient``: ``sample(SampleRequest)`` -> SampledBatch, a WireError (not ready / rate
-  limited) or None; ``send_priorities(bytes)``; ``replay_stats()`` / ``replay_control(body)``
+  limited) or None; ``send_priorities(PriorityUpdate)`` (the |TD errors| of a sampled batch's rows,
+  encoded by the adapter that puts it on the wire); ``replay_stats()``; ``set_phase(phase)``
   (one replay server: ``links.ZenohReplayShard``; several: ``shards.ShardedReplay`` over one
   each, a ``ReplayShardClient``, which can also send a request before waiting for it:
   ``request_sample``, returning a ``PendingSample``);
@@ -30,9 +31,12 @@ class ReplayClient(Protocol):
     """The replay server, as the learner uses it."""
 
     def sample(self, req: wire.SampleRequest) -> wire.SampledBatch | wire.WireError | None: ...
-    def send_priorities(self, payload: bytes) -> None: ...
+    def send_priorities(self, update: wire.PriorityUpdate) -> None: ...
     def replay_stats(self) -> dict | None: ...
-    def replay_control(self, body: dict) -> dict | None: ...
+    def set_phase(self, phase: int) -> bool:
+        """Rehearsal and DQfD: the replay server(s) to ``phase`` (2: online transitions join the
+        demos); True once every one took it, False when one refused or did not answer."""
+        ...
 
 
 class ReplayShardClient(ReplayClient, Protocol):
@@ -73,8 +77,8 @@ class ReplayThrough:
     def replay_stats(self) -> dict | None:
         return self.replay.replay_stats()
 
-    def replay_control(self, body: dict) -> dict | None:
-        return self.replay.replay_control(body)
+    def set_phase(self, phase: int) -> bool:
+        return self.replay.set_phase(phase)
 
-    def send_priorities(self, payload: bytes) -> None:
-        self.replay.send_priorities(payload)
+    def send_priorities(self, update: wire.PriorityUpdate) -> None:
+        self.replay.send_priorities(update)

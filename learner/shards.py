@@ -18,7 +18,7 @@ before it waits for any reply (``request_sample``), and keeps every rule of one 
   Each shard's importance weights ``(N_j p / M_j)^-beta`` are turned into the union's
   ``(N p / M)^-beta`` (N, M: all shards' items and mass) and normalised by the request's maximum.
   Row keys are returned as ``key * N + shard`` so the priority update of each row goes back to the
-  shard that sampled it (``send_priorities`` splits and re-encodes the message).
+  shard that sampled it (``send_priorities`` splits the update).
 - **Refusals.** A shard that refuses (its rate limiter, not enough items yet) or does not answer
   leaves its rows to the others: the request is served with the whole batches the answering
   shards' rows make, and the rows beyond the last whole batch are dropped and counted
@@ -154,16 +154,15 @@ class ShardedReplay:
 
     # ------------------------------------------------------------------ the rest of ReplayClient
 
-    def send_priorities(self, payload: bytes) -> None:
-        """Split a PRIORITIES message by the shard each row came from (``key * N + shard``)."""
-        update = wire.decode_priorities(payload)
+    def send_priorities(self, update: wire.PriorityUpdate) -> None:
+        """Split a priority update by the shard each row came from (``key * N + shard``)."""
         shard = update.index % self.n
         for i in range(self.n):
             mine = shard == i
             if mine.any():
-                self.shards[i].send_priorities(wire.encode_priorities(wire.PriorityUpdate(
+                self.shards[i].send_priorities(wire.PriorityUpdate(
                     index=update.index[mine] // self.n, is_demo=update.is_demo[mine],
-                    priority=update.priority[mine])))
+                    priority=update.priority[mine]))
 
     def replay_stats(self) -> dict | None:
         """Every shard's stats as one (``replay_stats.merge_replay_stats``); None unless all answered."""
@@ -176,17 +175,9 @@ class ShardedReplay:
                                           "partial_requests": self.partial_requests}
         return merged
 
-    def replay_control(self, body: dict) -> dict | None:
-        """A command to every shard (``set_phase``, ``stats``): ok only when every shard says so."""
-        replies = list(self._pool.map(lambda s: s.replay_control(body), self.shards))
-        if any(r is None for r in replies):
-            return None
-        failed = [r for r in replies if not r.get("ok")]
-        if failed:
-            return failed[0]
-        if body.get("cmd") == "stats":
-            return {"ok": True, "stats": merge_replay_stats([r["stats"] for r in replies])}
-        return replies[0]
+    def set_phase(self, phase: int) -> bool:
+        """Every shard to ``phase``: True only when every shard took it."""
+        return all(list(self._pool.map(lambda s: s.set_phase(phase), self.shards)))
 
     def close(self) -> None:
         self._pool.shutdown(wait=False, cancel_futures=True)

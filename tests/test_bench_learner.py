@@ -11,8 +11,8 @@ import json
 
 import torch
 
-from laneshift.bench import learner as bench_learner
-from laneshift.cli import build_parser
+from laneshift.tools.bench import learner as bench_learner
+from laneshift.tools.cli import build_parser
 
 
 def test_bench_learner_json_shape(capsys) -> None:

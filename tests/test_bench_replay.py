@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from laneshift import wire
-from laneshift.bench import replay as bench_replay
-from laneshift.bench.replay_harness import SAMPLE_BATCH, synthetic_message
-from laneshift.bench.replay_report import format_result
+from laneshift.tools.bench import replay as bench_replay
+from laneshift.tools.bench.replay_harness import SAMPLE_BATCH, synthetic_message
+from laneshift.tools.bench.replay_report import format_result
 from laneshift.deploy.processes import descendants
 
 

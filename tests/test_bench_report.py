@@ -1,15 +1,15 @@
 """The current performance table: rendered from one `bench all` JSON, and docs/performance.md holds
 exactly that rendering (so the page's figures come from one measured source with its revision).
 
-Room: tests, unit. May import: laneshift.bench.report, pytest, the standard library."""
+Room: tests, unit. May import: laneshift.tools.bench.report, pytest, the standard library."""
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
 
-from laneshift import cli
-from laneshift.bench.report import BEGIN, END, render, rows, splice
+from laneshift.tools import cli
+from laneshift.tools.bench.report import BEGIN, END, render, rows, splice
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "docs" / "results" / "bench-all.json"

@@ -11,7 +11,7 @@ import argparse
 import json
 import os
 
-from laneshift.bench import shards as bench_shards
+from laneshift.tools.bench import shards as bench_shards
 from laneshift.deploy.processes import descendants
 
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import pytest
 
-from laneshift.bench.suite import derive
+from laneshift.tools.bench.suite import derive
 
 
 def _shard_row(shards: int, per_s: float) -> dict:
@@ -48,7 +48,7 @@ def test_derive_leaves_null_what_did_not_run():
 def test_training_rate_reads_the_whole_of_training_and_its_last_two_thirds(tmp_path):
     import json
 
-    from laneshift.bench.run import training_rate
+    from laneshift.tools.bench.run import training_rate
 
     # 0-10 s: a slow ramp (100 env steps/s); 10-30 s: steady at 1,000/s, 125 updates/s.
     recs = [{"kind": "learner", "time": 100.0 + t, "env_steps": 100 * t if t <= 10 else 1000 + 1000 * (t - 10),
@@ -64,7 +64,7 @@ def test_training_rate_reads_the_whole_of_training_and_its_last_two_thirds(tmp_p
 def test_bench_run_refuses_a_run_dir_of_its_own():
     import pytest
 
-    from laneshift.bench.run import bench_run
+    from laneshift.tools.bench.run import bench_run
 
     with pytest.raises(SystemExit, match="must not hold --run-dir"):
         bench_run("--workers 2 --run-dir=/tmp/somewhere")
@@ -107,7 +107,7 @@ def test_derive_bounds_p1_by_the_bare_loop_before_and_after_the_run():
 def test_bench_run_vs_bound_flags_rounds_whose_bound_moved_and_summarises_the_rest(monkeypatch):
     """Bare loop 100, 104, 160, 158 around three runs: the middle round's bound moved 54 % and its
     fraction reads 1.14; it is listed, flagged, and left out of the resolved summary."""
-    from laneshift.bench import run_vs_bound
+    from laneshift.tools.bench import run_vs_bound
 
     bares = iter([100.0, 104.0, 160.0, 158.0])
     runs = iter([700.0, 1200.0, 1000.0])
@@ -129,8 +129,8 @@ def test_bench_run_vs_bound_flags_rounds_whose_bound_moved_and_summarises_the_re
 def test_bench_p1_is_a_hidden_old_name_that_says_the_new_one(monkeypatch, capsys):
     """`laneshift bench p1` runs `bench run-vs-bound` after one line naming it, and `laneshift bench
     --help` lists only the new name."""
-    from laneshift.bench import run_vs_bound
-    from laneshift.cli import build_parser
+    from laneshift.tools.bench import run_vs_bound
+    from laneshift.tools.cli import build_parser
 
     ran = []
     monkeypatch.setattr(run_vs_bound, "bench_run_vs_bound", lambda *a: ran.append(a) or {"rounds": []})

@@ -9,7 +9,7 @@ import json
 
 import pytest
 
-from laneshift.studies.checkpoint_curve import evaluate_checkpoints, first_reaching, kept_checkpoints, render, select_best
+from laneshift.tools.studies.checkpoint_curve import evaluate_checkpoints, first_reaching, kept_checkpoints, render, select_best
 from laneshift.config import EnvConfig, load_run_config
 from laneshift.deploy.inprocess import train_inprocess
 
@@ -30,7 +30,7 @@ def test_kept_checkpoints_carry_their_training_budget_and_are_scored(tmp_path):
     assert "| u00000050.safetensors | 50 |" in render(rows, ("random",))
     assert first_reaching(rows, "random", "survival_rate", 2.0) is None
     # The command: a table, the validation-selected checkpoint, copied where asked.
-    from laneshift.cli import main
+    from laneshift.tools.cli import main
     from laneshift.config import save_run_config
 
     save_run_config(cfg, tmp_path / "config.yaml")
@@ -64,7 +64,7 @@ def test_select_best_ranks_by_the_worst_initial_lane_then_survival_and_keeps_the
 
 def test_sb3_dqn_trains_on_the_laneshift_env_and_reports_a_curve(tmp_path, capsys):
     pytest.importorskip("stable_baselines3")  # optional extra [baselines]; `make` installs it
-    from laneshift.studies.sb3_baseline import train_sb3
+    from laneshift.tools.studies.sb3_baseline import train_sb3
 
     res = train_sb3(EnvConfig(scenario="straight", max_steps=50), env_steps=400, eval_every=200, eval_episodes=2,
                     seed=0, eval_seed=5, out=tmp_path)

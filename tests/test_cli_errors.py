@@ -1,6 +1,6 @@
 """Bad input to any `laneshift` command: a non-zero exit and one short line on stderr, no traceback.
 
-Each case runs the real command line (``python -m laneshift.cli``) as a subprocess, with input
+Each case runs the real command line (``python -m laneshift.tools.cli``) as a subprocess, with input
 that every command must refuse before doing any work: an unknown scenario, a malformed --set,
 missing files or run dirs, bad numbers, an unreachable zenoh router. A case takes the CLI's
 start-up time (a few seconds), nothing more; they run a few at a time. Room: tests, system (the laneshift command in subprocesses). May import: the standard library and pytest.
@@ -58,7 +58,7 @@ CASES = [
 
 def _run(argv: list[str], cwd: Path, timeout: float = 60) -> subprocess.CompletedProcess:
     env = {k: v for k, v in os.environ.items() if k != "RAY_ADDRESS"}  # train must not find a cluster
-    return subprocess.run([sys.executable, "-m", "laneshift.cli", *argv], cwd=cwd, env=env, capture_output=True,
+    return subprocess.run([sys.executable, "-m", "laneshift.tools.cli", *argv], cwd=cwd, env=env, capture_output=True,
                           text=True, timeout=timeout, stdin=subprocess.DEVNULL)
 
 

@@ -1,7 +1,7 @@
 """What `laneshift` shows a user: --help (every option of every command says what it is, with its
 default), --version, and progress lines on stderr when stderr is not a terminal.
 
-Walks the real parser (``laneshift.cli.build_parser``), in process; two subprocesses check the
+Walks the real parser (``laneshift.tools.cli.build_parser``), in process; two subprocesses check the
 installed version and a long command's stdout/stderr split. Room: tests, unit. May import: the laneshift CLI and
 ``laneshift.progress``, pytest and the standard library.
 """
@@ -17,7 +17,7 @@ from importlib.metadata import version
 
 import pytest
 
-from laneshift.cli import build_parser, leaf_parsers
+from laneshift.tools.cli import build_parser, leaf_parsers
 
 
 def _commands(parser: argparse.ArgumentParser) -> list[argparse.ArgumentParser]:
@@ -80,9 +80,9 @@ def test_a_core_command_builds_its_parser_without_the_tools():
     """`laneshift train`'s process is the run's launcher: it never imports the tools' modules
     (gymnasium, matplotlib, the demo and study code); a tool command gets its own, and a word
     that names no command gets the full list."""
-    code = ("import sys; from laneshift.cli import build_parser; build_parser(['train', '--local']); "
-            "print(sorted(m for m in ('gymnasium', 'matplotlib', 'numpy', 'laneshift.demos', 'laneshift.bench', "
-            "'laneshift.studies') if m in sys.modules))")
+    code = ("import sys; from laneshift.tools.cli import build_parser; build_parser(['train', '--local']); "
+            "print(sorted(m for m in ('gymnasium', 'matplotlib', 'numpy', 'laneshift.demos', 'laneshift.tools.bench', "
+            "'laneshift.tools.studies') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "[]"
@@ -99,7 +99,7 @@ def test_a_core_command_builds_its_parser_without_the_tools():
 
 
 def test_version_flag_prints_the_installed_version():
-    proc = subprocess.run([sys.executable, "-m", "laneshift.cli", "--version"], capture_output=True, text=True,
+    proc = subprocess.run([sys.executable, "-m", "laneshift.tools.cli", "--version"], capture_output=True, text=True,
                           timeout=60)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.strip() == f"laneshift {version('laneshift')}"
@@ -122,7 +122,7 @@ def test_progress_off_a_terminal_is_plain_lines_without_carriage_returns(monkeyp
 
 def test_demos_generate_reports_progress_on_stderr_and_its_result_on_stdout(tmp_path):
     env = {**os.environ, "LANESHIFT_PROGRESS_S": "0"}
-    proc = subprocess.run([sys.executable, "-m", "laneshift.cli", "demos", "generate", "--scenario", "lka",
+    proc = subprocess.run([sys.executable, "-m", "laneshift.tools.cli", "demos", "generate", "--scenario", "lka",
                            "--episodes", "3", "--max-steps", "20", "--out", str(tmp_path / "d")],
                           capture_output=True, text=True, timeout=120, env=env)
     assert proc.returncode == 0, proc.stderr

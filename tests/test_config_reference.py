@@ -11,9 +11,9 @@ from pathlib import Path
 
 import yaml
 
-from laneshift import cli
+from laneshift.tools import cli
 from laneshift.config import METHODS, SECTIONS
-from laneshift.config_reference import all_fields, as_markdown, find, meaning
+from laneshift.tools.config_reference import all_fields, as_markdown, find, meaning
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "config.md"
 

@@ -168,7 +168,7 @@ class _NoLinks:
 
     def publish_stats(self, payload: bytes) -> None: ...
     def replay_stats(self): return None
-    def replay_control(self, body): return {"ok": True}
+    def set_phase(self, phase): return True
     def take_episodes(self): return []
     def stop_requested(self): return False
 

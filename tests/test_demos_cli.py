@@ -14,8 +14,9 @@ import h5py
 import numpy as np
 import pytest
 
-from laneshift.demos import generate_shard, load_shard
-from laneshift.demos.cli import env_kwargs_from_args, main, register
+from laneshift.demos import load_shard
+from laneshift.tools.demos.generate import generate_shard
+from laneshift.tools.demos.cli import env_kwargs_from_args, main, register
 from laneshift.demos.shard import dataset_data_dir
 
 

@@ -14,9 +14,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from laneshift.demos import generate_shard, load_shard
-from laneshift.demos.cli import main
-from laneshift.demos.humanlike import (
+from laneshift.demos import load_shard
+from laneshift.tools.demos.generate import generate_shard
+from laneshift.tools.demos.cli import main
+from laneshift.tools.demos.humanlike import (
     DEFAULT_ACTION_NOISE,
     DEFAULT_REACTION_STEPS,
     HumanLikeDriver,

@@ -10,7 +10,7 @@ import itertools
 import pytest
 
 from laneshift.actors.envs.actions import PAPER_ACTIONS
-from laneshift.demos.keys import action_label, control_command, keys_to_action
+from laneshift.tools.demos.keys import action_label, control_command, keys_to_action
 
 
 def test_single_keys_and_no_key() -> None:

@@ -21,14 +21,14 @@ import pytest
 from laneshift.demos import (
     LEGACY_DATASET_ID,
     ShardError,
-    generate_shard,
     load_shard,
     shard_dataset_id,
-    write_shard,
 )
-from laneshift.demos.cli import main
+from laneshift.tools.demos.generate import generate_shard
+from laneshift.tools.demos.writer import write_shard
+from laneshift.tools.demos.cli import main
 from laneshift.demos.envsupport import make_env
-from laneshift.demos.drivers import run_episode, scripted_driver
+from laneshift.tools.demos.drivers import run_episode, scripted_driver
 from laneshift.demos.shard import dataset_data_dir, read_metadata
 
 STRAIGHT = "laneshift/StraightLaneChange-v0"

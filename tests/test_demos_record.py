@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from laneshift.demos import load_shard
-from laneshift.demos.keys import keys_to_action
+from laneshift.tools.demos.keys import keys_to_action
 
 ENV_KWARGS = {"observation": "vector", "max_steps": 4}
 
@@ -64,7 +64,7 @@ def offscreen(monkeypatch: pytest.MonkeyPatch) -> None:
 def test_record_round_trip_with_scripted_keys(offscreen, tmp_path: Path) -> None:
     import pygame
 
-    from laneshift.demos.record import record_shard
+    from laneshift.tools.demos.record import record_shard
 
     screens = []
 
@@ -103,7 +103,7 @@ def test_record_round_trip_with_scripted_keys(offscreen, tmp_path: Path) -> None
 def test_quit_before_any_episode_writes_nothing(offscreen, tmp_path: Path) -> None:
     import pygame
 
-    from laneshift.demos.record import record_shard
+    from laneshift.tools.demos.record import record_shard
 
     def before_frame(frame: int) -> None:
         pygame.event.post(_key("down", "up") if frame == 0 else _key("down", "q"))
@@ -115,7 +115,7 @@ def test_quit_before_any_episode_writes_nothing(offscreen, tmp_path: Path) -> No
 
 
 def test_record_refuses_non_paper_action_envs(offscreen, tmp_path: Path) -> None:
-    from laneshift.demos.record import record_shard
+    from laneshift.tools.demos.record import record_shard
 
     with pytest.raises(ValueError, match="9 paper actions"):
         record_shard(tmp_path / "lka", env_id_or_scenario="straight",
@@ -123,7 +123,7 @@ def test_record_refuses_non_paper_action_envs(offscreen, tmp_path: Path) -> None
 
 
 def test_completed_episodes_survive_a_crash(offscreen, tmp_path: Path) -> None:
-    from laneshift.demos.record import record_shard
+    from laneshift.tools.demos.record import record_shard
 
     def before_frame(frame: int) -> None:
         if frame == 6:  # after one 4-step episode and two steps of the next

@@ -20,11 +20,11 @@ import pytest
 
 from laneshift.demos import (
     ShardError,
-    generate_shard,
     load_shard,
     load_shards,
-    write_shard,
 )
+from laneshift.tools.demos.generate import generate_shard
+from laneshift.tools.demos.writer import write_shard
 from laneshift.demos.checksum import episodes_sha256, transition_sha256
 from laneshift.demos.framestack import rebuild_frame_stacks, split_frame_stacks
 from laneshift.demos.shard import dataset_data_dir

@@ -194,3 +194,18 @@ def test_rayjob_entrypoint_places_replay_and_learner_on_the_head():
     mounts = [m["mountPath"] for m in _head_container(doc)["volumeMounts"]]
     assert any(Path("/data/runs/k8s").is_relative_to(m) for m in mounts)
     assert doc["spec"]["shutdownAfterJobFinishes"] is True
+
+
+def test_the_image_copies_every_folder_the_package_maps():
+    """The Dockerfile copies the folders one by one (no .venv or runs/ from the build context), so a
+    folder that pyproject.toml maps into ``laneshift`` and the image leaves out would build an image
+    without that part of the package (``laneshift`` itself lives in tools/)."""
+    import re
+    import tomllib
+
+    root = KUBERAY.parents[1]
+    package_dir = tomllib.loads((root / "pyproject.toml").read_text())["tool"]["setuptools"]["package-dir"]
+    tops = {path.split("/")[0] for path in package_dir.values()}
+    copied = set(re.findall(r"^COPY (\S+) \./\1$", (KUBERAY / "Dockerfile").read_text(), re.M))
+    assert {"src", "actors", "learner", "replay_server", "deploy", "tools"} <= tops
+    assert tops <= copied, f"mapped but not copied into the image: {sorted(tops - copied)}"

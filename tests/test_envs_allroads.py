@@ -121,8 +121,8 @@ def test_the_scripted_driver_completes_allroads_episodes_as_on_each_road():
 
 
 def test_the_human_like_stand_in_and_the_demo_shard_drive_it(tmp_path):
-    from laneshift.demos.generate import generate_shard
-    from laneshift.demos.humanlike import measure
+    from laneshift.tools.demos.generate import generate_shard
+    from laneshift.tools.demos.humanlike import measure
     from laneshift.demos.shard import load_shard
 
     rates = measure("allroads", {"max_steps": 30}, 4, 0, 5, 0.07)

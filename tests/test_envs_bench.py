@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from laneshift.bench import env as bench_env
+from laneshift.tools.bench import env as bench_env
 
 
 def test_json_output_has_the_required_fields(capsys) -> None:

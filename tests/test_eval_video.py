@@ -11,7 +11,7 @@ import json
 
 import pytest
 
-from laneshift.cli import main
+from laneshift.tools.cli import main
 
 STRAIGHT = "laneshift/StraightLaneChange-v0"
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from laneshift.config import EnvConfig
-from laneshift.studies.evaluate import evaluate_policy, lka_response, plot_lka_response, wilson_ci95
+from laneshift.tools.studies.evaluate import evaluate_policy, lka_response, plot_lka_response, wilson_ci95
 
 
 def test_wilson_interval_known_values():
@@ -44,7 +44,7 @@ def test_keep_lane_policy_on_straight_never_achieves_from_a_non_target_lane():
 
 
 def test_a_checkpoint_of_another_observation_layout_is_refused_with_the_fix(tmp_path, capsys):
-    from laneshift.cli import main
+    from laneshift.tools.cli import main
     from laneshift.qnet import build_q_network
     from laneshift.qnet import save_checkpoint
 
@@ -58,7 +58,7 @@ def test_a_checkpoint_of_another_observation_layout_is_refused_with_the_fix(tmp_
 
 def test_crashes_are_counted_by_kind_and_starting_lane():
     from laneshift.config import EnvConfig
-    from laneshift.studies.evaluate import evaluate_policy
+    from laneshift.tools.studies.evaluate import evaluate_policy
 
     # Always turning left leaves the road or hits someone: every episode crashes, each counted once.
     r = evaluate_policy(lambda env: (lambda obs: 1), EnvConfig(scenario="straight", max_steps=200), 6, seed=3)
@@ -71,9 +71,9 @@ def test_demo_agreement_counts_the_states_where_the_greedy_action_is_the_demonst
     import numpy as np
     import torch
 
-    from laneshift.demos.generate import generate_shard
+    from laneshift.tools.demos.generate import generate_shard
     from laneshift.demos.shard import load_shard
-    from laneshift.studies.evaluate import demo_agreement
+    from laneshift.tools.studies.evaluate import demo_agreement
     from laneshift.qnet import build_q_network
     from laneshift.qnet import save_checkpoint
 
@@ -97,7 +97,7 @@ def test_the_policy_vehicles_are_driven_by_the_network_under_evaluation(tmp_path
 
     from laneshift.actors.envs import spec_of
     from laneshift.qnet import build_q_network, save_checkpoint
-    from laneshift.studies.evaluate import load_greedy_policy
+    from laneshift.tools.studies.evaluate import load_greedy_policy
 
     cfg = EnvConfig(scenario="straight", policy_vehicles=3, max_steps=5)
     schema = spec_of(cfg).schema

@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from laneshift.studies.experiments import register
+from laneshift.tools.studies.experiments import register
 
 
 def test_compare_runs_methods_and_seeds_and_writes_the_table(tmp_path):
@@ -44,8 +44,8 @@ def test_compare_runs_methods_and_seeds_and_writes_the_table(tmp_path):
 
 def test_reward_presets_study_trains_each_condition_with_its_own_exploration(tmp_path):
     from laneshift.config import load_run_config
-    from laneshift.studies.reward_study import preset_overrides
-    from laneshift.studies.reward_study import register as register_presets
+    from laneshift.tools.studies.reward_study import preset_overrides
+    from laneshift.tools.studies.reward_study import register as register_presets
 
     # Table 1: condition 1 explores 1.0 -> 0.3, condition 5 1.0 -> 0.1.
     assert load_run_config(overrides=preset_overrides(1)).actor.epsilon_final == 0.3
@@ -70,7 +70,7 @@ def test_reward_presets_study_trains_each_condition_with_its_own_exploration(tmp
 
 def test_train_method_applies_the_named_settings_under_mode_and_set(monkeypatch, capsys):
     """``laneshift train --method dqfd-bc`` is the experiment's settings in one flag; --set wins."""
-    from laneshift import cli
+    from laneshift.tools import cli
     from laneshift.deploy import local
     from laneshift.config import METHODS
 
@@ -90,7 +90,7 @@ def test_train_method_applies_the_named_settings_under_mode_and_set(monkeypatch,
 
 def test_the_human_like_stand_in_row_runs_on_the_test_episodes_of_both_lanes():
     from laneshift.config import EnvConfig
-    from laneshift.studies.experiments import HUMAN_LIKE_ROW, human_like_lanes
+    from laneshift.tools.studies.table2 import HUMAN_LIKE_ROW, human_like_lanes
 
     rows = human_like_lanes(EnvConfig(scenario="straight", max_steps=30), episodes=2, seed=100_000)
     assert set(rows) == {"random", "non-target"} and "stand-in" in HUMAN_LIKE_ROW

@@ -7,10 +7,16 @@ inside functions), read with ``ast`` so nothing is imported to check it:
 - each component (``laneshift.actors``, ``laneshift.learner``, ``laneshift.replay_server``)
   imports the contract and itself, never another component, ``deploy`` or a tool;
 - ``laneshift.deploy`` (the builder and the launchers) imports the contract, the components and
-  the demo tools, never the studies, the benchmarks or the CLI;
-- the tools (``laneshift.cli``, ``studies``, ``bench``, the demo tools) may import anything;
+  the demo tools (``laneshift.tools.demos``: a run's default demo shard is generated), never the
+  studies, the benchmarks or the CLI;
+- the tools (the ``laneshift.tools`` package: ``cli``, ``argtypes``, ``config_reference``,
+  ``studies``, ``bench``, ``demos``; and ``laneshift.__main__``, which Python wants beside the
+  package's ``__init__``) may import anything, and nothing below them imports them but that one
+  exception of ``deploy``;
 - every module is on a floor on purpose: one that is neither in the contract's list nor a component,
-  ``deploy`` or a named tool fails, so a new contract module cannot slip in as a tool;
+  ``deploy`` or a tool fails, so a new contract module cannot slip in as a tool;
+- the folder tree shows the floors: every module under ``src/laneshift`` is contract (but
+  ``__main__``), every module under ``tools/`` a tool, each component in its own folder;
 - inside the contract's two packages, ``laneshift.wire`` and ``laneshift.config``, each module imports
   only the modules before it in the package's order (``PACKAGE_ORDER``; the package's own
   ``__init__`` re-exports them, and no module imports it);
@@ -35,7 +41,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 #: Where each package's files are (pyproject.toml's package-dir).
 PACKAGE_DIRS = {"laneshift": "src/laneshift", "laneshift.actors": "actors", "laneshift.learner": "learner",
-                "laneshift.replay_server": "replay_server", "laneshift.deploy": "deploy"}
+                "laneshift.replay_server": "replay_server", "laneshift.deploy": "deploy", "laneshift.tools": "tools"}
 #: The contract's packages, each module in its order: a module may import only those before it.
 PACKAGE_ORDER = {
     "laneshift.wire": ("errors", "keys", "envelope", "batches", "fastpath", "transitions", "sampling", "weights",
@@ -48,19 +54,25 @@ CONTRACT = {"laneshift", *PACKAGE_ORDER, *(f"{p}.{m}" for p, order in PACKAGE_OR
             "laneshift.demos.checksum", "laneshift.demos.envsupport", "laneshift.demos.framestack",
             "laneshift.demos.outcomes"}
 COMPONENTS = ("actors", "learner", "replay_server")
-#: The tools: these modules and every module under these packages (the demo shard format excepted).
-TOOLS = {"laneshift.cli", "laneshift.argtypes", "laneshift.config_reference", "laneshift.__main__"}
-TOOL_PACKAGES = ("laneshift.studies", "laneshift.bench", "laneshift.demos")
+#: The tools: every module of this package, and ``python -m laneshift``'s door.
+TOOL_PACKAGE = "laneshift.tools"
+TOOLS = {"laneshift.__main__"}
+#: The tools ``deploy`` may import: the demo generator makes a run's default demo shard.
+DEMO_TOOLS = "laneshift.tools.demos"
+#: The folder of each floor (``deploy`` and the components are their own folders, PACKAGE_DIRS).
+FLOOR_DIRS = {"contract": "src/laneshift", "tools": "tools"}
 
 
 def floor(module: str) -> str:
-    """contract | actors | learner | replay_server | deploy | tools"""
+    """contract | actors | learner | replay_server | deploy | tools | none (on no floor: a test fails)"""
     if module in CONTRACT:
         return "contract"
+    if module in TOOLS or module == TOOL_PACKAGE or module.startswith(TOOL_PACKAGE + "."):
+        return "tools"
     part = module.split(".")[1] if "." in module else ""
     if part in COMPONENTS or part == "deploy":
         return part
-    return "tools"
+    return "none"
 
 
 def modules() -> dict[str, Path]:
@@ -117,7 +129,7 @@ def allowed(importer: str, imported: str) -> bool:
         return False
     if a in COMPONENTS:
         return b == a
-    return a == "deploy" and (b in COMPONENTS or b == "deploy" or imported.startswith("laneshift.demos."))
+    return a == "deploy" and (b in COMPONENTS or b == "deploy" or imported.startswith(DEMO_TOOLS + "."))
 
 
 def graph() -> dict[str, set[str]]:
@@ -127,7 +139,7 @@ def graph() -> dict[str, set[str]]:
 
 def report(g: dict[str, set[str]]) -> str:
     def label(module: str) -> str:  # the demo tools apart: the one kind of tool deploy may use
-        return "demo tools" if floor(module) == "tools" and module.startswith("laneshift.demos.") else floor(module)
+        return "demo tools" if module.startswith(DEMO_TOOLS + ".") else floor(module)
 
     edges: collections.Counter = collections.Counter()
     for importer, targets in g.items():
@@ -228,26 +240,48 @@ def test_the_floors_are_what_the_rules_say():
     assert floor("laneshift.qnet") == "contract" and floor("laneshift.demos.shard") == "contract"
     assert floor("laneshift.wire.fastpath") == "contract" and floor("laneshift.config.methods") == "contract"
     assert not allowed("laneshift.wire.keys", "laneshift.actors.envs")
-    assert not allowed("laneshift.config.loading", "laneshift.bench.cpu_meter")
-    assert floor("laneshift.demos.generate") == "tools" and floor("laneshift.studies.experiments") == "tools"
+    assert not allowed("laneshift.config.loading", "laneshift.tools.bench.cpu_meter")
+    assert not allowed("laneshift.demos", "laneshift.tools.demos.generate")
+    assert allowed("laneshift.deploy.run_dir", "laneshift.tools.demos.generate")
+    assert not allowed("laneshift.deploy.run_dir", "laneshift.tools.cli")
+    assert not allowed("laneshift.learner.loop", "laneshift.tools.demos.generate")
+    assert floor("laneshift.__main__") == "tools" and floor("laneshift.tools") == "tools"
+    assert floor("laneshift.somewhere_new") == "none"
+    assert floor("laneshift.tools.demos.generate") == "tools" and floor("laneshift.tools.studies.experiments") == "tools"
     assert not allowed("laneshift.actors.policy", "laneshift.learner.dqn")
     assert not allowed("laneshift.envspec", "laneshift.actors.envs")
     assert not allowed("laneshift.replay_server.service", "laneshift.deploy.builder")
-    assert not allowed("laneshift.deploy.launch", "laneshift.studies.evaluate")
+    assert not allowed("laneshift.deploy.launch", "laneshift.tools.studies.evaluate")
     assert allowed("laneshift.deploy.builder", "laneshift.learner.loop")
-    assert allowed("laneshift.studies.experiments", "laneshift.deploy.local")
+    assert allowed("laneshift.tools.studies.experiments", "laneshift.deploy.local")
 
 
 def test_every_module_is_on_a_floor_on_purpose():
-    """A module that is not in the contract's list falls to the tools' floor, which may import
-    anything: so every one there must be a named tool, and every name in the lists a module."""
+    """A module that is not in the contract's list, a component, ``deploy`` or the tools is on no
+    floor; every name in the lists is a module."""
     mods = modules()
-    stray = sorted(m for m in mods if floor(m) == "tools" and m not in TOOLS
-                   and not any(m == p or m.startswith(p + ".") for p in TOOL_PACKAGES))
-    assert not stray, ("modules on no floor (add them to CONTRACT or PACKAGE_ORDER, or to the tools): "
-                       + ", ".join(stray))
+    stray = sorted(m for m in mods if floor(m) == "none")
+    assert not stray, ("modules on no floor (add them to CONTRACT or PACKAGE_ORDER, or move them to a "
+                       "component, deploy/ or tools/): " + ", ".join(stray))
     missing = sorted((CONTRACT | TOOLS) - set(mods))
     assert not missing, "listed but not found (renamed or removed?): " + ", ".join(missing)
+
+
+def test_the_folder_tree_shows_the_floors():
+    """Where a file is says its floor: src/laneshift holds the contract alone (and ``__main__``, the
+    one file Python wants there), tools/ the tools, each component and deploy its own folder."""
+    mods = modules()
+    dirs = {**FLOOR_DIRS, **{f: PACKAGE_DIRS[f"laneshift.{f}"] for f in (*COMPONENTS, "deploy")}}
+    wrong = []
+    for name, path in sorted(mods.items()):
+        if name in TOOLS:
+            continue
+        top = dirs.get(floor(name))
+        if top is None or not path.relative_to(ROOT).as_posix().startswith(top + "/"):
+            wrong.append(f"{name} ({floor(name)}) is in {path.relative_to(ROOT)}")
+    assert not wrong, "files outside their floor's folder:\n" + "\n".join(wrong)
+    assert [n for n, p in mods.items() if p.is_relative_to(ROOT / "src/laneshift") and floor(n) != "contract"] \
+        == ["laneshift.__main__"], "src/laneshift holds the contract, and the door of python -m laneshift"
 
 
 def test_the_contract_packages_modules_import_only_those_before_them():

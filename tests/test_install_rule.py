@@ -324,7 +324,7 @@ def test_the_command_without_the_train_extra_says_what_to_install():
                "        if top in ('tqdm', 'zenoh', 'torch', 'ray'):\n"
                "            raise ModuleNotFoundError(f'No module named {top!r}', name=top)\n"
                "sys.meta_path.insert(0, Block())\n"
-               "from laneshift.cli import main\n"
+               "from laneshift.tools.cli import main\n"
                "raise SystemExit(main(['--help']))\n")
     proc = subprocess.run([sys.executable, "-c", blocker], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2

@@ -426,7 +426,7 @@ def test_cross_entropy_on_demo_rows_teaches_the_demonstrators_action_through_a_d
 
 
 def test_dueling_checkpoints_load_back_as_dueling_policies(tmp_path):
-    from laneshift.studies.evaluate import load_greedy_policy
+    from laneshift.tools.studies.evaluate import load_greedy_policy
     from laneshift.qnet import DuelingHead, build_q_network
     from laneshift.qnet import save_checkpoint
 

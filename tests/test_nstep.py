@@ -184,14 +184,14 @@ def test_the_learner_hands_every_row_field_the_update_reads_to_the_agent():
     """A sampled batch split into updates keeps `steps` (a lost column would silently bootstrap
     n-step returns with gamma instead of gamma^n)."""
     from laneshift import wire
-    from laneshift.learner.loop import UPDATE_FIELDS, _split
+    from laneshift.learner.batches import UPDATE_FIELDS, split_updates
 
     n = 6
     rows = {"obs": np.zeros((n, 2), np.float32), "next_obs": np.zeros((n, 2), np.float32),
             "action": np.zeros(n, np.int64), "reward": np.zeros(n, np.float32), "terminated": np.zeros(n, np.uint8),
             "steps": np.arange(1, n + 1, dtype=np.uint8), "is_demo": np.zeros(n, np.uint8),
             "index": np.arange(n, dtype=np.int64), "weight": np.ones(n, np.float32)}
-    parts = _split(wire.SampledBatch(num_batches=2, **rows))
+    parts = split_updates(wire.SampledBatch(num_batches=2, **rows))
     assert set(UPDATE_FIELDS) <= set(parts[0]) and "steps" in UPDATE_FIELDS
     assert parts[1]["steps"].tolist() == [4, 5, 6]
 

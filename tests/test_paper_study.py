@@ -13,7 +13,7 @@ import time
 import pytest
 
 from laneshift.config import METHODS, load_run_config, method_settings
-from laneshift.studies.paper import (MODES, answer, demo_episodes_needed, difference_ci, peak_decline,
+from laneshift.tools.studies.paper import (MODES, answer, demo_episodes_needed, difference_ci, peak_decline,
                                      render_table)
 
 
@@ -79,7 +79,7 @@ def test_the_answer_names_the_winner_its_margin_and_retentions_decline():
 
 
 def test_bad_modes_fail_before_anything_runs(tmp_path, capsys):
-    from laneshift import cli
+    from laneshift.tools import cli
 
     assert cli.main(["experiment", "paper", "--modes", "none,dqfq", "--out", str(tmp_path / "p")]) == 2
     assert "--modes" in capsys.readouterr().err
@@ -88,7 +88,7 @@ def test_bad_modes_fail_before_anything_runs(tmp_path, capsys):
 
 @pytest.mark.system
 def test_a_tiny_study_trains_every_mode_answers_and_a_second_run_trains_nothing(tmp_path, capsys):
-    from laneshift import cli
+    from laneshift.tools import cli
 
     out = tmp_path / "paper"
     argv = ["experiment", "paper", "--modes", "none,rehearsal", "--seeds", "0", "--env-steps", "1200",

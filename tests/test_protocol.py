@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 import yaml
 
-from laneshift.studies.protocol import (VALIDATION_SEED, eval_command, register, stability_drop,
+from laneshift.tools.studies.protocol import (VALIDATION_SEED, eval_command, register, stability_drop,
                                         time_to_threshold)
 
 TINY = ["--set", "replay.capacity=2000", "--set", "replay.min_size=200", "--set", "learner.hidden=32",
@@ -46,7 +46,7 @@ def test_time_to_threshold_and_the_largest_drop_after_the_target_on_hand_made_cu
 
 
 def test_the_validation_figure_is_the_mean_over_seeds(tmp_path):
-    from laneshift.studies.protocol import plot_validation
+    from laneshift.tools.studies.protocol import plot_validation
 
     runs = [{"seed": seed, "validation": {"curve": [{**r, "episodes": 20} for r in _curve(points)]}}
             for seed, points in ((0, [(100, 0.5), (200, 0.9), (300, 0.95)]), (1, [(150, 0.2), (250, 0.7), (320, 0.9)]))]
@@ -69,7 +69,7 @@ def test_eval_command_names_every_env_field_eval_has_no_flag_for():
 
 
 def test_protocol_trains_tests_publishes_and_skips_a_finished_seed(tmp_path, capsys):
-    from laneshift import cli
+    from laneshift.tools import cli
 
     out, pub = tmp_path / "proto", tmp_path / "published"
     argv = ["protocol", "--scenario", "straight", "--method", "dqfd", "--seeds", "0", "--env-steps", "2400",
@@ -126,7 +126,7 @@ def test_protocol_trains_tests_publishes_and_skips_a_finished_seed(tmp_path, cap
 
 
 def test_bad_input_fails_before_any_run(tmp_path, capsys):
-    from laneshift import cli
+    from laneshift.tools import cli
 
     for argv, needle in ((["--method", "dqfq"], "--method: unknown 'dqfq'"), (["--seeds", "0,0"], "named twice"),
                          (["--set", "learner.lr=fast"], "learner.lr"), (["--road", "a/b"], "--road"),
@@ -137,7 +137,7 @@ def test_bad_input_fails_before_any_run(tmp_path, capsys):
 
 
 def test_the_four_roads_evaluations_pool_into_one():
-    from laneshift.studies.allroads import merge_evals
+    from laneshift.tools.studies.allroads import merge_evals
 
     a = {"episodes": 2, "return_mean": 1.0, "return_std": 0.0, "length_mean": 10.0, "survival_rate": 1.0,
          "achievement_rate": 0.5, "crashes": {}}
@@ -154,10 +154,10 @@ def test_the_four_roads_evaluations_pool_into_one():
 
 
 def test_protocol_on_allroads_tests_each_road_on_its_own_episodes(tmp_path, capsys):
-    from laneshift import cli
+    from laneshift.tools import cli
     from laneshift.actors.envs.demonstrator import ScriptedDriver
     from laneshift.config import EnvConfig
-    from laneshift.studies.evaluate import evaluate_lanes
+    from laneshift.tools.studies.evaluate import evaluate_lanes
 
     out, pub = tmp_path / "proto", tmp_path / "published"
     argv = ["experiment", "protocol", "--scenario", "allroads", "--method", "dqfd", "--seeds", "0",

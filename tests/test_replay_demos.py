@@ -11,7 +11,7 @@ import pytest
 from laneshift import wire
 from laneshift.actors.envs import spec_of
 from laneshift.config import load_run_config
-from laneshift.demos.generate import generate_shard
+from laneshift.tools.demos.generate import generate_shard
 from laneshift.demos.shard import load_shard
 from laneshift.replay_server.service import build_core
 

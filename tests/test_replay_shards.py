@@ -162,8 +162,8 @@ def test_priority_updates_go_back_to_the_shard_each_row_came_from():
     cs = cores(2, [300, 300], sampler="prioritized")
     replay = sharded(cs)
     batch = replay.sample(SampleRequest(128))
-    replay.send_priorities(wire.encode_priorities(wire.PriorityUpdate(
-        index=batch.index, is_demo=batch.is_demo, priority=np.full(len(batch.index), 7.0, np.float32))))
+    replay.send_priorities(wire.PriorityUpdate(
+        index=batch.index, is_demo=batch.is_demo, priority=np.full(len(batch.index), 7.0, np.float32)))
     for i, core in enumerate(cs):
         mine = batch.obs[:, 1] == i
         assert core.priority_updates == 1 and core.rejected == {}
@@ -199,9 +199,9 @@ def test_sync_requests_need_every_shard_and_ask_each_for_its_own_workers():
 def test_control_and_stats_reach_every_shard():
     cs = cores(2, [120, 80], demo_mode="rehearsal")
     replay = sharded(cs)
-    assert replay.replay_control({"cmd": "set_phase", "phase": 2})["ok"]
+    assert replay.set_phase(2) is True
     assert [c.phase for c in cs] == [2, 2]
-    assert replay.replay_control({"cmd": "set_phase", "phase": 1})["ok"] is False  # phases only move forward
+    assert replay.set_phase(1) is False  # phases only move forward
     stats = replay.replay_stats()
     assert stats["tables"]["online"]["inserted"] == 0  # rehearsal's phase 1 stored nothing: it was phase 1
     assert stats["actors_total"]["count"] == 2 and stats["actors_total"]["items"] == 200

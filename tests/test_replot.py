@@ -2,7 +2,7 @@
 on a tiny synthetic results dir (no training): the across-seed table, the Table 2 bar chart, the
 curves against env steps, episodes and wall clock and the periodic greedy evaluations from the runs' metrics.jsonl, then again from the
 episodes.json it keeps once the run dirs are gone; older logs without env steps; bad paths.
-Room: tests, unit. May import: laneshift.studies.experiments, laneshift.cli, numpy, pytest and the standard library.
+Room: tests, unit. May import: laneshift.tools.studies, laneshift.tools.cli, numpy, pytest and the standard library.
 """
 
 from __future__ import annotations
@@ -13,8 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from laneshift import cli
-from laneshift.studies.experiments import EPISODES_FILE, render_table, table2_rows
+from laneshift.tools import cli
+from laneshift.tools.studies.runs import EPISODES_FILE
+from laneshift.tools.studies.table2 import render_table, table2_rows
 
 PNG = b"\x89PNG"
 

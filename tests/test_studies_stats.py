@@ -1,6 +1,6 @@
-"""The across-seed statistics of the studies (``laneshift.studies.stats``): the percentile bootstrap
+"""The across-seed statistics of the studies (``laneshift.tools.studies.stats``): the percentile bootstrap
 over runs and curves on a common grid, on cases whose answer is known. Fast and deterministic (the
-bootstrap is seeded). Room: tests, unit. May import: laneshift.studies.stats, numpy, pytest.
+bootstrap is seeded). Room: tests, unit. May import: laneshift.tools.studies.stats, numpy, pytest.
 """
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from laneshift.studies.stats import bootstrap_ci, common_range, curves_on_grid
+from laneshift.tools.studies.stats import bootstrap_ci, common_range, curves_on_grid
 
 
 def test_identical_runs_give_a_zero_width_interval_at_their_value():

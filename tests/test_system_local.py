@@ -26,7 +26,7 @@ from laneshift.config import load_run_config
 from laneshift.deploy.chaos import alive as _alive
 from laneshift.deploy.processes import descendants as _descendants
 from laneshift.deploy.local import train_local
-from laneshift.bench.run import process_label
+from laneshift.tools.bench.run import process_label
 from laneshift.deploy.processes import ProcessGroup, wait_for_file
 from laneshift.qnet import load_checkpoint, tensors_digest
 
@@ -39,7 +39,7 @@ FAST = {"env.scenario": "lka", "actor.workers": 2, "actor.send_every": 50, "acto
 
 @pytest.fixture(scope="module")
 def lka_demos(tmp_path_factory) -> str:
-    from laneshift.demos.generate import generate_shard
+    from laneshift.tools.demos.generate import generate_shard
 
     out = tmp_path_factory.mktemp("demos") / "lka"
     return str(generate_shard(out, env_id_or_scenario="lka", env_kwargs={}, episodes=6, seed=0))

@@ -9,6 +9,7 @@ Room: tests, unit. May import: the learner, the contract, the in-process runner,
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import threading
 import time
@@ -22,7 +23,8 @@ from laneshift.config import EnvConfig, load_run_config
 from laneshift.envspec import EnvSpec
 from laneshift.learner.dqn import METRIC_NAMES
 from laneshift.learner.loop import Learner
-from laneshift.learner.metrics import GreedyEval
+from laneshift.learner.periodic_eval import GreedyEval
+from laneshift.learner.status import LearnerStatus
 from laneshift.qnet import build_q_network
 
 event_accumulator = pytest.importorskip("tensorboard.backend.event_processing.event_accumulator")
@@ -60,13 +62,13 @@ class FakeLinks:
                 "rates": {"inserts_per_s": 10.0, "samples_per_s": 80.0}, "demo_share_buffer": 0.0,
                 "demo_share_recent_samples": 0.0, "sampled_rows": self.sampled}
 
-    def replay_control(self, body: dict) -> dict:
-        return {"ok": True}
+    def set_phase(self, phase: int) -> bool:
+        return True
 
     def publish_weights(self, payload: bytes) -> None:
         pass
 
-    def send_priorities(self, payload: bytes) -> None:
+    def send_priorities(self, update: wire.PriorityUpdate) -> None:
         pass
 
     def publish_stats(self, payload: bytes) -> None:
@@ -99,7 +101,7 @@ def _drive(learner: Learner, links: FakeLinks, rounds: int, replay_steps: int, a
     for _ in range(rounds):
         links.env_steps += replay_steps
         for actor in ("w0", "w1"):
-            links.episode(actor, learner.actor_steps.get(actor, 0) + actor_steps)
+            links.episode(actor, learner.episodes.worker_steps.get(actor, 0) + actor_steps)
         learner._async_step()
         learner._log()
 
@@ -279,6 +281,23 @@ def test_eval_during_training_on_the_lka_plant(tmp_path):
         assert s == sorted(s), tag
 
 
+def _status(**given) -> LearnerStatus:
+    """A LearnerStatus with ``given`` and every other field 0 (None where it may be None)."""
+    values = {}
+    for f in dataclasses.fields(LearnerStatus):
+        if f.name not in given and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+            values[f.name] = None if "None" in str(f.type) else 0
+    return LearnerStatus(**{**values, **given})
+
+
+def test_the_status_names_every_update_metric_and_every_prometheus_metric_is_a_status_field():
+    from laneshift.learner.prometheus import COUNTERS, GAUGES
+
+    names = [f.name for f in dataclasses.fields(LearnerStatus)]
+    assert set(METRIC_NAMES) <= set(names)
+    assert set(COUNTERS) | set(GAUGES) <= set(names)
+
+
 def test_learner_prometheus_endpoint_serves_its_status():
     """learner.metrics_port: /metrics in the Prometheus text format, counters as _total, the
     status of the newest log interval, process metrics; closed with the learner's finish."""
@@ -288,9 +307,9 @@ def test_learner_prometheus_endpoint_serves_its_status():
 
     server = LearnerMetricsServer("127.0.0.1", 0)
     try:
-        server.update({"updates": 12, "env_steps": 3400, "episodes": 7, "loss": 0.25, "q_mean": -1.5,
-                       "version": 3, "phase": 0, "version_lag": {"w0": 1, "w1": 0}, "return_mean": None,
-                       "sample_wait_s": 1.5, "sample_wait_share": 0.04})
+        server.update(_status(updates=12, env_steps=10, episodes=7, loss=0.25, q_mean=-1.5, version=3, phase=0,
+                              version_lag={"w0": 1, "w1": 0}, return_mean=None, sample_wait_s=1.5,
+                              sample_wait_share=0.04), env_steps=3400)  # the learner's count, not the replay's
         text = urllib.request.urlopen(f"http://127.0.0.1:{server.port}/metrics", timeout=5).read().decode()
     finally:
         server.close()
@@ -328,8 +347,8 @@ def test_the_wait_for_the_replay_to_fill_is_not_counted_as_the_workers_bounding_
         learner._async_step()
     status = learner._status()
     learner._finish()
-    assert status["sample_wait_s"] >= 0.5  # the fill, waited by the update thread
-    assert status["training_s"] is not None and status["training_wait_s"] < 0.25
+    assert status.sample_wait_s >= 0.5  # the fill, waited by the update thread
+    assert status.training_s is not None and status.training_wait_s < 0.25
 
 
 def test_the_summarys_final_greedy_evaluation_is_in_tensorboard_and_metrics_jsonl(tmp_path):

@@ -197,19 +197,36 @@ def _check_run(h, run_dir: Path) -> None:
           f"{ {n: w['weight_updates'] for n, w in workers.items()} }")
 
 
-@pytest.mark.parametrize("via", ["gcs", pytest.param("ray-client", marks=pytest.mark.xfail(
-    strict=False, reason="Ray Client's server failed to start once in a namespace under load "
-                         "('Starting Ray client server failed'); passes otherwise"))])
+def _client_server_logs(logs: Path, limit: int = 3000) -> str:
+    """The head's Ray Client logs (the proxy's and each specific server's), as the harness kept them."""
+    found = sorted(logs.glob("ray-logs-lsA*/ray_client_server*"))
+    return "\n".join(f"-- {p.name} (tail) --\n{p.read_text(errors='replace')[-limit:]}" for p in found) or \
+        f"(no ray_client_server* log under {logs})"
+
+
+@pytest.mark.parametrize("via", ["gcs", "ray-client"])
 def test_two_host_train_cluster(tmp_path, netns_ok, via):
-    """``--cluster HOST:PORT`` (a driver on the head) and ``--cluster ray://HOST:10001`` (Ray Client)."""
+    """``--cluster HOST:PORT`` (a driver on the head) and ``--cluster ray://HOST:10001`` (Ray Client).
+
+    Through Ray Client, the server process the head's proxy starts for the driver can crash between
+    fork and exec on a loaded machine (gRPC's event engine in the forked child; the proxy answers
+    ``Starting Ray client server failed``, about one start in three here); the driver then connects again
+    (``deploy.ray_connection.CLIENT_TRIES``). A run that fails all the same fails the test, with the
+    head's client-server logs (kept by the harness at teardown) beside the run's output."""
+    failed = None
     with twohost.two_hosts(tmp_path) as h:
         run_dir = tmp_path / "run"
         address = h.ray_address if via == "gcs" else f"ray://{twohost.HOST_A}:{twohost.RAY_CLIENT_PORT}"
         started = time.monotonic()
         r = h.run_in_a(_train_argv(address, run_dir), timeout=300)
-        print(f"laneshift train --cluster {address}: rc {r.returncode} in {time.monotonic() - started:.0f} s")
-        assert r.returncode == 0, _show(r, "laneshift train --cluster") + f"\n(logs: {h.logs}, {run_dir / 'logs'})"
-        _check_run(h, run_dir)
+        retried = r.stderr.count("connecting again")
+        print(f"laneshift train --cluster {address}: rc {r.returncode} in {time.monotonic() - started:.0f} s"
+              + (f", after {retried} failed start(s) of the head's client server" if retried else ""))
+        if r.returncode != 0:
+            failed = _show(r, "laneshift train --cluster") + f"\n(logs: {h.logs}, {run_dir / 'logs'})"
+        else:
+            _check_run(h, run_dir)
+    assert failed is None, failed + ("\n" + _client_server_logs(h.logs) if via == "ray-client" else "")
 
 
 def _has_jobs_cli() -> str | None:

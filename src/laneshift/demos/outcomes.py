@@ -2,7 +2,7 @@
 
 Both are read from the episode's final ``info`` dict: ``info["crashed"]`` (highway-env's flag,
 which laneshift's envs also set when the car leaves the road) and ``info["on_target_lane"]``.
-As in the paper (and ``laneshift.studies.evaluate``), an episode achieves only if it is on the target
+As in the paper (and ``laneshift.tools.studies.evaluate``), an episode achieves only if it is on the target
 lane at its last step *without* having crashed: a crash on the target lane is no achievement.
 A missing key gives None ("unknown"), and a rate over episodes is None unless every episode
 knows it.

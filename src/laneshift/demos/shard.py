@@ -21,7 +21,7 @@ transition arrays (:class:`DemoShard`), verify the sha256 recorded at write time
 shard against the run's env.
 
 The checksum covers the flat transition arrays, not the file encoding (scheme in
-:mod:`laneshift.demos.checksum`). Shards are written by :func:`laneshift.demos.writer.write_shard`.
+:mod:`laneshift.demos.checksum`). Shards are written by :func:`laneshift.tools.demos.writer.write_shard`.
 
 Imports: numpy, h5py (lazily) and the demos package's own helpers; never minari (reading needs
 only the files).
@@ -59,7 +59,7 @@ FORMAT = "laneshift-demos"
 FORMAT_VERSION = 1
 RECORDERS = ("human", "scripted")
 # recorded_by of a human-like stand-in starts with this (the full label names its parameters and
-# says "not a person": laneshift.demos.humanlike.stand_in_label).
+# says "not a person": laneshift.tools.demos.humanlike.stand_in_label).
 STAND_IN_PREFIX = "human-like stand-in"
 PREFIX_DATASET = "laneshift_stack_prefix"  # extra hdf5 dataset per episode (Minari ignores it)
 # The Minari id every shard had before shards got their own (shard_dataset_id); such shards

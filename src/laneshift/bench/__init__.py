@@ -1,1 +1,0 @@
-"""Room: the tools (benchmarks). May import: anything in laneshift."""
