@@ -51,7 +51,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from laneshift import transport, wire
-from laneshift.argtypes import parse_set
+from laneshift.tools.argtypes import parse_set
 from laneshift.config import ConfigError, ReplayConfig, TransportConfig, load_run_config
 from laneshift.progress import progress
 from laneshift.progress import write as progress_write
