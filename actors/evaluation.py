@@ -27,7 +27,7 @@ import gymnasium as gym
 import numpy as np
 
 from laneshift.config import EnvConfig
-from laneshift.envspec import ALLROADS, SCENARIOS
+from laneshift.envspec import ALLROADS, LAYOUT_OPTIONS, SCENARIOS
 from laneshift.progress import progress as progress_bar
 
 from .envs import make as make_env
@@ -182,14 +182,17 @@ def load_greedy_policy(checkpoint: str | Path) -> GreedyPolicy:
 def checkpoint_env_settings(meta: Mapping[str, str]) -> dict[str, str]:
     """The env a checkpoint was trained on, as far as its metadata tells, as EnvConfig fields:
     ``observation`` (stacked frames, a 3-d uint8 ``obs_shape``: grayscale; a 1-d one: vector) and
-    ``scenario`` (its ``env_id``, when it is one of the scenarios). Whatever it does not tell is
-    left out; the vector's layout (its length) is not an EnvConfig choice made here.
+    ``scenario`` (its ``env_id``, when it is one of the scenarios), and the layout options
+    (``LAYOUT_OPTIONS``) the run set. Whatever it does not tell is left out (a checkpoint written
+    before the learner recorded the layout options: the error names the option that fits).
 
     >>> checkpoint_env_settings({"obs_shape": "4,100,100", "obs_dtype": "|u1",
     ...                          "env_id": "laneshift/MergeLaneChange-v0"})
     {'observation': 'grayscale', 'scenario': 'merge'}
     >>> checkpoint_env_settings({"obs_shape": "82"})
     {'observation': 'vector'}
+    >>> checkpoint_env_settings({"obs_shape": "88", "alongside_features": "1"})
+    {'observation': 'vector', 'alongside_features': True}
     """
     out: dict[str, str] = {}
     dims = [d for d in str(meta.get("obs_shape", "")).split(",") if d.strip()]
@@ -200,6 +203,9 @@ def checkpoint_env_settings(meta: Mapping[str, str]) -> dict[str, str]:
     scenario = {env_id: name for name, env_id in SCENARIOS.items()}.get(str(meta.get("env_id", "")))
     if scenario is not None:
         out["scenario"] = scenario
+    for option in LAYOUT_OPTIONS:  # written by the learner where the run set them ("0" / "1")
+        if str(meta.get(option, "")) in ("0", "1"):
+            out[option] = meta[option] == "1"
     return out
 
 

@@ -80,3 +80,25 @@ def test_pixel_run_learns_from_frames_held_once_each(tmp_path):
     assert online["frames"]["per_item"] < 2.5 and online["frames"]["evicted_for_frames"] == 0
     assert result["updates"] > 0
     assert result["updates"] * 32 + result["learner"]["sample_rows_unused"] == replay["sampled_rows"]
+
+
+def test_a_checkpoint_carries_its_observation_layout_and_eval_builds_that_env(tmp_path, capsys):
+    """A run with env.alongside_features writes it into its checkpoints' metadata, so `laneshift eval`
+    on a plain config builds the 88-float env the network reads (a run that left the option at its
+    default writes nothing, and an older checkpoint without the key is evaluated as before)."""
+    from laneshift.tools.cli import main
+    from laneshift.wire import safetensors_loads
+
+    cfg = load_run_config(overrides={**FAST, "env.scenario": "merge", "env.alongside_features": "true",
+                                     "env.max_steps": 20, "train.env_steps": 400, "replay.min_size": 50,
+                                     "train.run_dir": str(tmp_path)})
+    train_inprocess(cfg)
+    final = tmp_path / "checkpoints" / "final.safetensors"
+    _, meta = safetensors_loads(final.read_bytes())
+    assert meta["obs_shape"] == "88" and meta["alongside_features"] == "1" and "lane_features" not in meta
+    capsys.readouterr()
+    assert main(["eval", "--checkpoint", str(final), "--episodes", "1", "--max-steps", "5"]) == 0
+    assert "from the checkpoint: scenario merge, alongside_features True" in capsys.readouterr().err
+    # An explicit contrary choice is kept and refused, naming the fix.
+    assert main(["eval", "--checkpoint", str(final), "--episodes", "1", "--set", "env.alongside_features=false"]) == 2
+    assert "--set env.alongside_features=true" in capsys.readouterr().err

@@ -283,7 +283,7 @@ def _eval(args: argparse.Namespace) -> int:
 
 def _eval_env_from_checkpoint(args: argparse.Namespace, cfg: RunConfig) -> dict[str, str]:
     """The env settings ``laneshift eval`` takes from the checkpoint's metadata (its observation
-    type and scenario) where the user chose none: not by a flag, ``--set`` or the ``--config``
+    type, scenario and layout options) where the user chose none: not by a flag, ``--set`` or the ``--config``
     file; only those that differ from the config's. An explicit choice that contradicts the
     checkpoint is kept, and refused by the evaluation with what would fit."""
     from laneshift.actors.evaluation import checkpoint_env_settings

@@ -23,6 +23,10 @@ from .config import EnvConfig
 from .wire import TransitionSchema
 
 
+#: The env options that change the vector observation's layout (EnvConfig fields of the same names).
+#: A learner checkpoint's metadata carries those the run set, so an evaluation can build the same env.
+LAYOUT_OPTIONS = ("lane_features", "alongside_features")
+
 #: Scenario name -> gymnasium id (registered by importing ``laneshift.actors.envs``).
 SCENARIOS: dict[str, str] = {
     "straight": "laneshift/StraightLaneChange-v0",

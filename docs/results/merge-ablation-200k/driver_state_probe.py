@@ -1,7 +1,11 @@
 """Does the scripted driver's hidden state explain what a network cannot imitate? (diagnostic only)
 Drives merge episodes with the ScriptedDriver, records the observation, the action and two things the
 driver decides from and the observation lacks: its planned lane (relative to the current one) and its
-gap test for the lane towards the target. Then trains the same MLP with and without them."""
+gap test for the lane towards the target. Then trains the same MLP with and without them.
+
+Room: a diagnostic script beside its results (run by path, not installed). May import: laneshift
+(any floor), numpy, torch.
+"""
 import sys, numpy as np, torch
 from laneshift.actors.envs import make
 from laneshift.actors.envs.demonstrator import ScriptedDriver, _towards

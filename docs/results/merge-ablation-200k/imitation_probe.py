@@ -3,6 +3,9 @@ docs/RESULTS.md (merge), not part of the product: trains an MLP with cross-entro
 and reports its agreement with the driver on the held-out episodes of a larger shard.
 
     python imitation_probe.py TRAIN_SHARD HELDOUT_SHARD [HIDDEN=256,256] [EPOCHS=20] [FIRST_HELDOUT_EPISODE=600]
+
+Room: a diagnostic script beside its results (run by path, not installed). May import: laneshift
+(any floor), numpy, torch.
 """
 import sys, time, numpy as np, torch
 from laneshift.demos.shard import load_shard

@@ -2,6 +2,9 @@
 last 12 steps of a crash). A diagnostic of docs/RESULTS.md (merge), not part of the product.
 
     python trace_crash.py CHECKPOINT EPISODE_SEED   (the checkpoint of the 82-float observation)
+
+Room: a diagnostic script beside its results (run by path, not installed). May import: laneshift
+(any floor), numpy, torch.
 """
 import sys, numpy as np
 from laneshift.actors.envs import make
