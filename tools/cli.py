@@ -421,7 +421,7 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     if "bench" in wanted:
         _add_bench(sub)
     if "chaos" in wanted:
-        from laneshift.deploy.chaos import register as register_chaos
+        from laneshift.tools.chaos import register as register_chaos
 
         register_chaos(sub)
     for command_parser in leaf_parsers(parser):  # errors name the command they came from

@@ -35,7 +35,7 @@ from typing import Any, Callable
 
 from laneshift.config import load_run_config
 
-from .processes import descendants
+from laneshift.deploy.processes import descendants
 
 #: A small, fast run with every mechanism on (LKA plant: seconds per thousand steps).
 FAST = {"env.scenario": "lka", "actor.workers": 2, "actor.send_every": 50, "actor.epsilon_decay_steps": 1000,
@@ -246,7 +246,7 @@ def run_fault(name: str, work: Path, env_steps: int, demos: str | None) -> dict:
     if spec.get("link"):  # the workers reach the router through a proxy that strikes the link
         from laneshift.transport import free_tcp_port
 
-        from .linkproxy import LinkProxy
+        from laneshift.deploy.linkproxy import LinkProxy
 
         router_port = free_tcp_port()
         proxy = LinkProxy(router_port, latency_s=spec["link"].get("latency_s", 0.0),
@@ -281,7 +281,7 @@ def run_fault(name: str, work: Path, env_steps: int, demos: str | None) -> dict:
         inject = FaultInjector(run_dir, spec["component"], at_steps=int(env_steps * spec.get("at", 0.25)), ready=ready,
                                when_stopped=checkpointing(run_dir) if spec.get("while") == "checkpointing" else None)
     inject.start()
-    from .local import train_local
+    from laneshift.deploy.local import train_local
 
     out = io.StringIO()
     started = time.monotonic()
@@ -570,7 +570,7 @@ def _disk_full(name: str, spec: dict, where: Path, env_steps: int) -> dict:
         run_dir = where / "run"
         cfg = load_run_config(overrides={**FAST, "train.run_dir": str(run_dir), "train.env_steps": env_steps,
                                          **spec.get("overrides", {})})
-        from .local import train_local
+        from laneshift.deploy.local import train_local
 
         out = io.StringIO()
         started = time.monotonic()
