@@ -270,13 +270,23 @@ def build_core(cfg: RunConfig, spec: EnvSpec, shard: int = 0) -> ReplayCore:
     return ReplayCore(cfg.replay.shard(shard), spec.schema, demo)
 
 
+#: Env fields added after replay checkpoints were first written, with their defaults: such a field
+#: joins the digest only when a run sets it, so a run started before it existed still resumes
+#: (``laneshift train --resume``) on the version that added it. Add every new env field here.
+ENV_FIELDS_ADDED_LATER: dict[str, object] = {"alongside_features": False}
+
+
 def config_digest(cfg: RunConfig, shard: int = 0) -> str:
     """What a replay checkpoint must match to be restored: the env and the table layout (a
     shard's checkpoint: that shard of that many). (Not the router endpoint or ports: those change
     when a run is resumed.)"""
     import hashlib
 
-    key = {"env": cfg.to_dict()["env"], "capacity": cfg.replay.capacity, "demo_mode": cfg.replay.demo_mode,
+    env = cfg.to_dict()["env"]
+    for name, default in ENV_FIELDS_ADDED_LATER.items():  # left at its default: the digest of before
+        if env.get(name) == default:
+            env.pop(name, None)
+    key = {"env": env, "capacity": cfg.replay.capacity, "demo_mode": cfg.replay.demo_mode,
            "demo_ratio": cfg.replay.demo_ratio, "n_step": cfg.learner.n_step}
     if cfg.replay.shards > 1:  # a single server's digest stays what it was: its checkpoints restore
         key["shard"] = [shard, cfg.replay.shards]

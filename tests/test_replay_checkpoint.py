@@ -524,3 +524,25 @@ def test_a_seq_counted_lost_is_still_taken_after_a_checkpoint_and_a_kill(tmp_pat
     assert (w0["stored"], w0["lost_batches"], w0["lost_items"]) == (40, 0, 0), w0
     assert sorted(assert_items_whole(fresh).tolist()) == list(range(40))
     assert fresh.missing("w0") == []
+
+
+def test_a_new_env_field_left_at_its_default_keeps_the_checkpoint_digest_of_before():
+    """A run started on an older version resumes on a newer one: a field added to the env config
+    joins the replay checkpoint's digest only when the run sets it."""
+    import dataclasses
+
+    from laneshift.config import EnvConfig, load_run_config
+    from laneshift.replay_server.service import ENV_FIELDS_ADDED_LATER, config_digest
+
+    # The env fields replay checkpoints were first written with, and two digests of that time.
+    first = {"scenario", "observation", "reward_preset", "max_steps", "initial_lane", "action_set", "policy_vehicles",
+             "lane_features", "road"}
+    fields = {f.name: f.default for f in dataclasses.fields(EnvConfig)}
+    later = set(fields) - first
+    assert later == set(ENV_FIELDS_ADDED_LATER), "list a new env field in ENV_FIELDS_ADDED_LATER with its default"
+    assert all(ENV_FIELDS_ADDED_LATER[name] == fields[name] for name in later)
+    assert config_digest(load_run_config()) == "06198228aaf85316"
+    merge = {"env.scenario": "merge", "env.max_steps": 300, "replay.capacity": 300000}
+    assert config_digest(load_run_config(overrides=merge)) == "d8431e9c1da4e976"
+    # Set, it is part of the digest: another observation layout is another table.
+    assert config_digest(load_run_config(overrides={**merge, "env.alongside_features": True})) != "d8431e9c1da4e976"
