@@ -62,10 +62,16 @@ def test_select_best_ranks_by_the_worst_initial_lane_then_survival_and_keeps_the
     assert select_best(lka, ("random",))["checkpoint"] == "b"
 
 
-def test_sb3_dqn_trains_on_the_laneshift_env_and_reports_a_curve(tmp_path, capsys):
+def test_sb3_dqn_trains_on_the_laneshift_env_and_reports_a_curve(tmp_path, capsys, monkeypatch):
     pytest.importorskip("stable_baselines3")  # optional extra [baselines]; `make` installs it
+    import tempfile
+
     from laneshift.tools.studies.sb3_baseline import train_sb3
 
+    # SB3's default logger would leave an empty SB3-<date> dir in the temp dir on every run.
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(scratch))
     res = train_sb3(EnvConfig(scenario="straight", max_steps=50), env_steps=400, eval_every=200, eval_episodes=2,
                     seed=0, eval_seed=5, out=tmp_path)
     assert [row["env_steps"] for row in res["curve"]] == [200, 400]
@@ -73,3 +79,4 @@ def test_sb3_dqn_trains_on_the_laneshift_env_and_reports_a_curve(tmp_path, capsy
     saved = json.loads((tmp_path / "results.json").read_text())
     assert saved["algorithm"] == "DQN" and saved["net_arch"] == [256, 256]
     assert (tmp_path / "sb3_dqn.zip").exists()
+    assert not list(scratch.glob("SB3-*"))

@@ -34,6 +34,7 @@ def train_sb3(env_cfg: EnvConfig, env_steps: int, eval_every: int, eval_episodes
     try:
         from stable_baselines3 import DQN
         from stable_baselines3.common.callbacks import BaseCallback
+        from stable_baselines3.common.logger import Logger
     except ImportError as exc:
         raise SystemExit(f"needs stable-baselines3: pip install -e '.[baselines]' ({exc})")
     import numpy as np
@@ -42,6 +43,8 @@ def train_sb3(env_cfg: EnvConfig, env_steps: int, eval_every: int, eval_episodes
     torch.set_num_threads(1)
     model = DQN("MlpPolicy", make_env(env_cfg), seed=seed, verbose=0, buffer_size=100_000,
                 policy_kwargs={"net_arch": [256, 256]})
+    # A logger that writes nowhere: SB3's default makes an empty /tmp/SB3-<date> dir on every learn().
+    model.set_logger(Logger(folder=None, output_formats=[]))
     curve: list[dict] = []
     eval_time = [0.0]
     started = time.monotonic()
