@@ -28,7 +28,6 @@ Room: the tools (studies). May import: anything in laneshift.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from pathlib import Path
 from typing import Any
@@ -41,7 +40,7 @@ from laneshift.progress import write
 from laneshift.tools.studies import protocol
 from laneshift.tools.studies.evaluate import INITIAL_LANES
 from laneshift.tools.argtypes import seed_list
-from laneshift.tools.studies.plots import plot_curves
+from laneshift.tools.studies.plots import PAPER_TABLE2, plot_curves  # the paper's Table 2 (straight road, frames)
 from laneshift.tools.studies.runs import collect_episodes, write_episodes
 from laneshift.tools.studies.table2 import HUMAN_LIKE_ROW, across_seeds
 from laneshift.tools.studies.stats import RESAMPLES, SEED
@@ -50,11 +49,6 @@ from laneshift.tools.studies.stats import RESAMPLES, SEED
 MODES: dict[str, str] = {"none": "none-anneal", "retention": "retention-anneal",
                          "rehearsal": "rehearsal-anneal", "dqfd": "dqfd-bc-anneal"}
 DEMONSTRATORS = ("scripted", "human-like")
-#: The paper's Table 2 (straight road, 100 x 100 grayscale frames): (survival %, achievement %).
-PAPER_TABLE2: dict[str, dict[str, tuple[float, float]]] = {
-    "none": {"random": (53, 50), "non-target": (33, 29)},
-    "retention": {"random": (49, 37), "non-target": (37, 10)},
-    "rehearsal": {"random": (67, 66), "non-target": (51, 48)}}
 #: The episode seeds of the demo shard: apart from training (actor seeds), test (100,000+) and
 #: validation (200,000+) episodes.
 DEMO_SEED = 10_000
