@@ -1,6 +1,6 @@
 """Test helper, not a test file: network faults for ``tests/test_network_faults.py``.
 
-* ``SlowLinkProxy``: a TCP proxy on 127.0.0.1 that forwards to one upstream (the run's zenoh
+* ``LinkProxy`` (``laneshift.deploy.linkproxy``, the run's own, which ``laneshift chaos`` uses too): a TCP proxy on 127.0.0.1 that forwards to one upstream (the run's zenoh
   router) and makes the link slow and jittery: every chunk read in either direction is delivered
   ``latency_s`` +- ``jitter_s`` later (uniform), in order (a TCP stream cannot be reordered, so a
   chunk never overtakes the one before it), and every ``reset_every_s`` (counted from the first
@@ -89,7 +89,3 @@ def set_link(ns: str, dev: str, up: bool) -> None:
                    capture_output=True, text=True, timeout=15)
 
 
-# ---------------------------------------------------------------------------- the slow, jittery proxy
-
-# The proxy itself is the run's own (laneshift chaos uses it): laneshift.deploy.linkproxy.
-SlowLinkProxy = LinkProxy

@@ -14,7 +14,7 @@
   queued is lost (counted), and this test fails on the recovery bound. On failure the message
   holds the TCP state of B's connections to the router (``ss``) before, during and after the cut.
 * ``test_slow_jittery_link_to_the_workers`` (``chaos``): a local run whose env workers reach the
-  router through ``netfaults.SlowLinkProxy`` on 127.0.0.1 (50 ms +- 20 ms per chunk each way, one
+  router through ``LinkProxy`` (``laneshift.deploy.linkproxy``) on 127.0.0.1 (50 ms +- 20 ms per chunk each way, one
   connection reset every 15 s; ``deploy.worker_router``), then the same run without the proxy;
   both must complete with every transition stored (0 lost: what a reset dropped is sent again);
   the throughputs are printed.
@@ -305,7 +305,7 @@ def _steps_per_s(run_dir: Path) -> float:
 @pytest.mark.chaos  # two local runs of ~45 s each
 def test_slow_jittery_link_to_the_workers(tmp_path):
     router_port = free_tcp_port()
-    with netfaults.SlowLinkProxy(router_port, latency_s=0.05, jitter_s=0.02, reset_every_s=15.0, seed=1) as proxy:
+    with netfaults.LinkProxy(router_port, latency_s=0.05, jitter_s=0.02, reset_every_s=15.0, seed=1) as proxy:
         slow_dir = tmp_path / "slow"
         rc, text, wall = _local_run(slow_dir, {"deploy.router_port": router_port,
                                                "deploy.worker_router": proxy.endpoint})

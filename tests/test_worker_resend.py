@@ -9,7 +9,6 @@ laneshift (any floor), pytest, numpy, the standard library and what the code und
 
 from __future__ import annotations
 
-import importlib.util
 import os
 import signal
 import sys
@@ -23,21 +22,11 @@ import pytest
 from laneshift import transport, wire
 from laneshift.actors.links import MAX_IN_FLIGHT, ZenohActorLinks
 from laneshift.config import TransportConfig, load_run_config, save_run_config
+from laneshift.deploy.linkproxy import LinkProxy
 from laneshift.deploy.processes import ProcessGroup, wait_for_file
 
 ITEMS = 10  # per batch
 BATCHES = 240
-
-
-def _load(name: str):
-    # tests/ is not a package and pytest runs with --import-mode=importlib: load helpers by path.
-    spec = importlib.util.spec_from_file_location(f"laneshift_tests_{name}", Path(__file__).with_name(f"{name}.py"))
-    module = sys.modules.get(spec.name)
-    if module is None:
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[spec.name] = module
-        spec.loader.exec_module(module)
-    return module
 
 
 def batch(seq: int) -> wire.TransitionBatch:
@@ -145,10 +134,9 @@ def test_a_replay_server_killed_with_batches_on_their_way_loses_none_of_them(tmp
 def test_connection_resets_lose_no_batch(tmp_path):
     """The worker reaches the router through a proxy that resets its connection three times while
     it sends: the puts that die with a connection are sent again, nothing is lost or stored twice."""
-    netfaults = _load("netfaults")
     server = Server(tmp_path, **{"replay.checkpoint_every_s": 0})
     port = int(server.endpoint.rsplit(":", 1)[1])
-    with netfaults.SlowLinkProxy(port, latency_s=0.0, jitter_s=0.0, reset_every_s=0) as proxy:
+    with LinkProxy(port, latency_s=0.0, jitter_s=0.0, reset_every_s=0) as proxy:
         cfg = TransportConfig(router=proxy.endpoint, run_id=server.cfg.transport.run_id)
         try:
             with transport.open_session(cfg) as session:
