@@ -79,7 +79,7 @@ def lane_block(neighbours: list[tuple[float, float, float, float] | None], along
     ``None`` = no such lane; a gap of ``inf`` = nobody within range), then with ``alongside`` the
     alongside features of every slot (a missing lane: all zero)."""
     out = np.zeros((len(LANE_SLOTS), len(LANE_FEATURES)), np.float32)
-    near = np.zeros((len(LANE_SLOTS), len(ALONGSIDE_FEATURES)), np.float32)
+    near = np.zeros((len(LANE_SLOTS), len(ALONGSIDE_FEATURES)), np.float32) if alongside else None
     for i, nb in enumerate(neighbours):
         if nb is None:
             continue
@@ -87,9 +87,10 @@ def lane_block(neighbours: list[tuple[float, float, float, float] | None], along
         out[i] = (1.0,
                   min(front, GAP_RANGE) / GAP_SCALE, dv_front / GAP_SPEED_SCALE if front <= GAP_RANGE else 0.0,
                   min(rear, GAP_RANGE) / GAP_SCALE, dv_rear / GAP_SPEED_SCALE if rear <= GAP_RANGE else 0.0)
-        nearest = min(front, rear)
-        near[i] = (float(nearest < 0.0), max(-1.0, min(1.0, nearest / NEAR_GAP_SCALE)))
-    return np.concatenate([out.ravel(), near.ravel()]) if alongside else out.ravel()
+        if near is not None:
+            nearest = min(front, rear)
+            near[i] = (float(nearest < 0.0), max(-1.0, min(1.0, nearest / NEAR_GAP_SCALE)))
+    return out.ravel() if near is None else np.concatenate([out.ravel(), near.ravel()])
 
 
 def vector_observation(
