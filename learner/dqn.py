@@ -44,6 +44,7 @@ from laneshift.qnet import build_q_network
 
 from torch.optim.swa_utils import get_ema_multi_avg_fn
 
+from .augment import random_shift
 from .optim import EagerAdam
 
 #: The metrics every update returns, in this order.
@@ -186,6 +187,11 @@ class DoubleDQN:
         # learner.terminal_value bootstrapped after a terminal step, by the same lookup: gamma ** steps
         # * terminal_value where the row ended its episode, 0 where it did not.
         self._terminal_table = torch.stack([zeros, powers * cfg.terminal_value], dim=1).numpy()
+        # learner.augment=shift (DrQ): its own generator, so the shifts repeat for a seed whatever
+        # else draws from torch's global one.
+        self._augment_gen: torch.Generator | None = None
+        if cfg.augment == "shift" and len(obs_shape) == 3:
+            self._augment_gen = torch.Generator().manual_seed(cfg.seed + 1)
         self.updates = 0
         self._last: _UpdateRecord | None = None
         self.reset_optimizer()
@@ -281,6 +287,10 @@ class DoubleDQN:
         discount = self._discount(batch["steps"], batch["terminated"])
         weight = batch.get("weight")
         rows = reward.shape[0]
+        if self._augment_gen is not None:
+            # DrQ: the online pass and the target see independently shifted frames.
+            obs = random_shift(obs, cfg.augment_pad, self._augment_gen)
+            next_obs = random_shift(next_obs, cfg.augment_pad, self._augment_gen)
 
         # Q(s, .) with grad; Double DQN's chooser Q_online(s', .) without.
         if self.concat_online_pass:

@@ -287,6 +287,11 @@ class LearnerConfig:
     # The CNN for grayscale frames: nature (Mnih et al. 2015) or small (laneshift.qnet SmallCNN,
     # about 3x the updates/s on 2 CPU cores; what the pixel Table 2 runs use).
     cnn: Literal["nature", "small"] = "nature"
+    # Image augmentation of grayscale batches (DrQ, Kostrikov et al. 2021): in every update each
+    # row's frames of obs and of next_obs are shifted by up to ``augment_pad`` pixels each way (edge
+    # pixels repeated), a fresh shift per row. none = off; vector observations are never augmented.
+    augment: Literal["none", "shift"] = "none"
+    augment_pad: int = 4  # the largest shift of learner.augment=shift, in pixels
     target_update_period: int = 500  # updates between hard target-network syncs
     huber_delta: float = 1.0  # the TD loss is quadratic within this distance, linear beyond
     # The value the TD target takes after an episode's terminal step (a crash or leaving the road)
@@ -343,6 +348,7 @@ class LearnerConfig:
                      "checkpoint_every", "prefetch", "torch_threads"):
             _check(getattr(self, name) >= 1, f"learner.{name}", "must be >= 1", getattr(self, name))
         _check(self.prefetch <= 64, "learner.prefetch", "must be <= 64", self.prefetch)
+        _check(1 <= self.augment_pad <= 32, "learner.augment_pad", "must be 1..32", self.augment_pad)
         _check(self.huber_delta > 0, "learner.huber_delta", "must be > 0", self.huber_delta)
         _check(math.isfinite(self.terminal_value), "learner.terminal_value", "must be a finite number", self.terminal_value)
         _check(self.grad_clip > 0, "learner.grad_clip", "must be > 0", self.grad_clip)
