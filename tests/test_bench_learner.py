@@ -26,12 +26,14 @@ def test_bench_learner_json_shape(capsys) -> None:
     assert out["device"] == "cpu" and out["device_name"] and out["torch"] == torch.__version__
     assert out["threads"] == 1 and out["rounds"] == 2 and out["cuda"] is None
     assert [c["name"] for c in out["cases"]] == [c.name for c in bench_learner.CASES]
+    assert {c["name"]: c["cnn_precision"] for c in out["cases"]}["small-b32-bf16"] == "bf16"
     nets = {c["name"]: (c["network"], c["obs_shape"], c["obs_dtype"], c["batch"]) for c in out["cases"]}
     assert nets == {"mlp-b256": ("MLPQNetwork", [82], "float32", 256),
                     "cnn-b32": ("NatureCNN", [4, 100, 100], "uint8", 32),
                     "cnn-b64": ("NatureCNN", [4, 100, 100], "uint8", 64),
                     "small-b32": ("SmallCNN", [4, 100, 100], "uint8", 32),
-                    "small-b64": ("SmallCNN", [4, 100, 100], "uint8", 64)}
+                    "small-b64": ("SmallCNN", [4, 100, 100], "uint8", 64),
+                    "small-b32-bf16": ("SmallCNN", [4, 100, 100], "uint8", 32)}
     for case in out["cases"]:
         assert case["params"] > 0 and case["n_actions"] == 9
         for impl in ("learner", "bare"):

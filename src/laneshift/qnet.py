@@ -79,9 +79,19 @@ class _FrameQNetwork(nn.Module):
         with torch.no_grad():
             flat = self.features(torch.zeros(1, *in_shape)).shape[1]
         self.head = nn.Sequential(nn.Linear(flat, units), nn.ReLU(), _head(units, n_actions, dueling))
+        # The convolutions' compute dtype (``build_q_network``'s conv_precision): None runs them in
+        # float32; bfloat16 runs them under autocast. The parameters stay float32 either way (the
+        # weights on the wire do not change) and the layers after the convolutions always run in
+        # float32, so Q-values keep float32's resolution where actions differ by small margins.
+        self.conv_dtype: torch.dtype | None = None
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        return self.head(self.features(obs.float() / 255.0))
+        frames = obs.float() / 255.0
+        if self.conv_dtype is None:
+            return self.head(self.features(frames))
+        with torch.autocast(frames.device.type, dtype=self.conv_dtype):
+            features = self.features(frames)
+        return self.head(features.float())
 
 
 class NatureCNN(_FrameQNetwork):
@@ -108,16 +118,24 @@ class SmallCNN(_FrameQNetwork):
 
 CNNS = {"nature": NatureCNN, "small": SmallCNN}
 
+#: The convolutions' compute dtype per ``learner.cnn_precision``.
+CONV_DTYPES: dict[str, torch.dtype | None] = {"fp32": None, "bf16": torch.bfloat16}
+
 
 def build_q_network(obs_shape: tuple[int, ...], n_actions: int, hidden: tuple[int, ...] = (256, 256),
-                    dueling: bool = False, cnn: str = "nature") -> nn.Module:
-    """MLP for 1-D observations; for (stack, H, W) images the Nature CNN or the small CNN (``cnn``)."""
+                    dueling: bool = False, cnn: str = "nature", conv_precision: str = "fp32") -> nn.Module:
+    """MLP for 1-D observations; for (stack, H, W) images the Nature CNN or the small CNN (``cnn``),
+    its convolutions computed in ``conv_precision`` (fp32 or bf16; an MLP is always fp32)."""
     if len(obs_shape) == 1:
         return MLPQNetwork(obs_shape[0], n_actions, hidden, dueling)
     if len(obs_shape) == 3:
         if cnn not in CNNS:
             raise ValueError(f"no CNN {cnn!r} (one of {', '.join(CNNS)})")
-        return CNNS[cnn](tuple(obs_shape), n_actions, dueling)  # type: ignore[arg-type]
+        if conv_precision not in CONV_DTYPES:
+            raise ValueError(f"no conv precision {conv_precision!r} (one of {', '.join(CONV_DTYPES)})")
+        net = CNNS[cnn](tuple(obs_shape), n_actions, dueling)  # type: ignore[arg-type]
+        net.conv_dtype = CONV_DTYPES[conv_precision]
+        return net
     raise ValueError(f"no Q-network for observation shape {obs_shape}")
 
 

@@ -62,6 +62,7 @@ class Case:
     obs_dtype: str
     batch: int
     cnn: str = "nature"  # learner.cnn, for image observations
+    precision: str = "fp32"  # learner.cnn_precision
 
 
 CASES = (
@@ -70,6 +71,7 @@ CASES = (
     Case("cnn-b64", (4, 100, 100), "uint8", 64),
     Case("small-b32", (4, 100, 100), "uint8", 32, "small"),  # learner.cnn=small: the pixel runs' network
     Case("small-b64", (4, 100, 100), "uint8", 64, "small"),
+    Case("small-b32-bf16", (4, 100, 100), "uint8", 32, "small", "bf16"),  # learner.cnn_precision=bf16
 )
 
 
@@ -158,7 +160,7 @@ def learner_step(case: Case, cfg: LearnerConfig) -> tuple[Callable[[], None], to
     """One ``DoubleDQN.update`` per call, cycling over the parts of one decoded SampledBatch."""
     from laneshift.learner.dqn import DoubleDQN
 
-    agent = DoubleDQN(case.obs_shape, N_ACTIONS, dataclasses.replace(cfg, cnn=case.cnn))
+    agent = DoubleDQN(case.obs_shape, N_ACTIONS, dataclasses.replace(cfg, cnn=case.cnn, cnn_precision=case.precision))
     parts = _split(sampled_batch(case, cfg.prefetch))
     state = {"i": 0}
 
@@ -176,7 +178,7 @@ def bare_step(case: Case, cfg: LearnerConfig, device: torch.device) -> Callable[
     from laneshift.qnet import build_q_network
 
     torch.manual_seed(cfg.seed)
-    online = build_q_network(case.obs_shape, N_ACTIONS, cfg.hidden, cfg.dueling, case.cnn).to(device)
+    online = build_q_network(case.obs_shape, N_ACTIONS, cfg.hidden, cfg.dueling, case.cnn, case.precision).to(device)
     target = copy.deepcopy(online).requires_grad_(False)
     # The learner's optimizer (fused Adam, learner/dqn.py): "the same optimizer" is the fair bar.
     opt = torch.optim.Adam(online.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay, fused=device.type in ("cpu", "cuda"))
@@ -273,7 +275,8 @@ def bench(device: str = "auto", *, seconds: float = 3.0, rounds: int = 2, warmup
                 for name, step in impls.items():
                     per_round[name].append(measure(step, seconds, dev))
             row: dict[str, Any] = {
-                "name": case.name, "network": type(online).__name__, "obs_shape": list(case.obs_shape),
+                "name": case.name, "network": type(online).__name__, "cnn_precision": case.precision,
+                "obs_shape": list(case.obs_shape),
                 "obs_dtype": case.obs_dtype, "batch": case.batch, "n_actions": N_ACTIONS,
                 "params": sum(p.numel() for p in online.parameters())}
             for name, runs in per_round.items():
@@ -303,13 +306,13 @@ def format_result(r: dict) -> str:
     head = (f"laneshift bench learner: {r['device']} ({r['device_name']}), torch {r['torch']}, "
             f"{r['threads']} thread(s), {r['rounds']} rounds x {r['seconds']:g} s alternating, updates/s "
             f"(mean [min..max])")
-    cols = (f"{'case':<10} {'network':<12} {'params':>9} {'batch':>5}  {'DoubleDQN.update':>24}  {'bare torch':>24}  "
+    cols = (f"{'case':<14} {'network':<12} {'params':>9} {'batch':>5}  {'DoubleDQN.update':>24}  {'bare torch':>24}  "
             f"{'ratio':>5}  {'cpu ratio':>9}")
     lines = [head, cols, "-" * len(cols)]
     for c in r["cases"]:
         cells = [f"{c[k]['updates_per_s']:.1f} [{c[k]['min']:.1f}..{c[k]['max']:.1f}]" for k in ("learner", "bare")]
         cpu = c.get("learner_over_bare_cpu")
-        lines.append(f"{c['name']:<10} {c['network']:<12} {c['params']:>9,} {c['batch']:>5}  {cells[0]:>24}  "
+        lines.append(f"{c['name']:<14} {c['network']:<12} {c['params']:>9,} {c['batch']:>5}  {cells[0]:>24}  "
                      f"{cells[1]:>24}  {c['learner_over_bare']:>5.2f}  {cpu if cpu is None else format(cpu, '.2f'):>9}")
     lines.append("ratio = DoubleDQN.update / bare torch in updates/s (numpy batch in, as the learner gets it, vs "
                  "resident tensors); cpu ratio = the same in updates per CPU-second of this process")

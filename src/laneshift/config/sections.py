@@ -291,6 +291,11 @@ class LearnerConfig:
     # row's frames of obs and of next_obs are shifted by up to ``augment_pad`` pixels each way (edge
     # pixels repeated), a fresh shift per row. none = off; vector observations are never augmented.
     augment: Literal["none", "shift"] = "none"
+    # The learner's convolutions in bfloat16 (autocast; the parameters, the layers after the
+    # convolutions and the loss stay float32): 1.3-1.6x the SmallCNN updates/s at batch 32 on the
+    # dev machine's AMD EPYC, which has avx512_bf16 (`laneshift bench learner --cases small-b32,small-b32-bf16`).
+    # A CPU without bfloat16 instructions emulates them, slower than fp32. Acting stays float32.
+    cnn_precision: Literal["fp32", "bf16"] = "fp32"
     augment_pad: int = 4  # the largest shift of learner.augment=shift, in pixels
     target_update_period: int = 500  # updates between hard target-network syncs
     huber_delta: float = 1.0  # the TD loss is quadratic within this distance, linear beyond
