@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from laneshift.tools.studies.stats import bootstrap_ci, common_range, curves_on_grid
+from laneshift.tools.studies.stats import bootstrap_ci, common_range, curves_on_grid, drop_noise_floor
 
 
 def test_identical_runs_give_a_zero_width_interval_at_their_value():
@@ -97,3 +97,13 @@ def test_curves_that_share_no_range_give_nothing():
     assert len(c["x"]) == len(c["mean"]) == len(c["lo"]) == len(c["hi"]) == 0
     with pytest.raises(ValueError):
         curves_on_grid([np.zeros(3)], [np.zeros(2)])
+
+
+def test_drop_noise_floor_of_a_constant_policy_shrinks_with_the_episodes_per_evaluation():
+    few, many = drop_noise_floor(0.96, 20, 10, 0.93), drop_noise_floor(0.96, 200, 10, 0.93)
+    # 20 episodes: one more failure is 5 points, so a policy that never changes still "drops" ~10.
+    assert few["median"] == 0.1 and few["share_above_5_points"] > 0.7
+    assert many["median"] < 0.05 and many["p90"] <= 0.06 and many["share_above_5_points"] < 0.2
+    assert drop_noise_floor(1.0, 20, 10, 0.93) == {"median": 0.0, "p90": 0.0, "share_above_5_points": 0.0}
+    assert drop_noise_floor(0.5, 20, 10, 0.99, draws=200) is None  # never reaches the target
+    assert drop_noise_floor(0.96, 20, 10, 0.93) == few  # seeded
