@@ -1,5 +1,7 @@
-"""The worker's seams over zenoh: transitions out (BLOCK, held until the replay server has
-them, sent again if it lacks them), newest weights in, control in.
+"""The worker's seams (``seams.ActorLinks``) over zenoh: transitions out (BLOCK, held until the
+replay server has them, sent again if it lacks them), newest weights in (decoded here: the worker
+gets ``wire.Weights``, or the ``wire.WireError`` of a message it cannot read), control in. The
+encoding and decoding of every message the worker sends or takes is here.
 
     >>> links = ZenohActorLinks(session, "run", "w0")  # doctest: +SKIP
     >>> worker.run(links, env_steps=10_000)  # doctest: +SKIP
@@ -16,6 +18,8 @@ import time
 import zenoh
 
 from laneshift import transport, wire
+
+from .seams import WeightsUpdate
 
 
 #: Batches a worker may have sent that the replay server has not stored yet, and how often
@@ -163,10 +167,10 @@ class ZenohActorLinks:
     def send_episode(self, record: wire.EpisodeRecord) -> None:
         self._episodes.put(wire.encode_episode(record))
 
-    def latest_weights(self) -> bytes | None:
-        return self._weights.take()
+    def latest_weights(self) -> WeightsUpdate:
+        return _weights_update(self._weights.take())
 
-    def wait_weights(self, timeout: float) -> bytes | None:
+    def wait_weights(self, timeout: float) -> WeightsUpdate:
         data = self._weights.wait(timeout)
         if data is None and time.monotonic() - self._last_query > 1.0:
             # Nothing pushed to us (we joined late, or reconnected): ask for the latest.
@@ -176,7 +180,7 @@ class ZenohActorLinks:
             self._weights_wait.missed()
         else:
             self._weights_wait.answered()
-        return data
+        return _weights_update(data)
 
     def wait_insert_ok(self) -> None:
         """Block while the replay server says the learner is too far behind (rate limiter)."""
@@ -203,3 +207,13 @@ class ZenohActorLinks:
         self._weights.close()
         self._stop.close()
         self._flow.close()
+
+
+def _weights_update(data: bytes | None) -> WeightsUpdate:
+    """A WEIGHTS message decoded; the WireError of one that cannot be read (the worker counts it)."""
+    if data is None:
+        return None
+    try:
+        return wire.decode_weights(data)
+    except wire.WireError as exc:
+        return exc

@@ -1,17 +1,10 @@
 """An env worker: runs env copies, acts epsilon-greedily with its latest weights, sends batches.
 
-The worker only knows three tiny seams (Acme style), so the same class runs inside a Ray actor
-over zenoh (``ZenohActorLinks``) and in-process in unit tests (``laneshift.deploy.inprocess``);
-the links own the encoding:
-
-- ``ExperienceSink``: ``send_transitions(TransitionBatch)``, ``send_episode(EpisodeRecord)`` and
-  ``flush()`` (at the end of the budget: wait, bounded, until the replay server holds every batch
-  sent; False if it does not);
-- ``WeightsSource`` (Acme's VariableSource): ``latest_weights() -> bytes | None`` (newest unseen
-  version, never blocks) and ``wait_weights(timeout) -> bytes | None``. They stay the wire's
-  safetensors bytes because the worker itself verifies them and counts the ones it refuses;
-- ``RunControl``: ``wait_insert_ok()`` (blocks while the replay's rate limiter says the learner is
-  behind) and ``stop_requested() -> bool``.
+The worker only knows the three tiny seams of ``seams`` (Acme style: ``ExperienceSink``,
+``WeightsSource``, ``RunControl``, as one ``ActorLinks``), so the same class runs inside a Ray
+actor over zenoh (``links.ZenohActorLinks``) and in-process in unit tests
+(``laneshift.deploy.inprocess``); the links own the encoding, and what crosses is typed:
+transitions batches and episode records out, decoded weights in.
 
 Every ``send_every`` env steps it publishes one transitions batch (MATLAB: "workers send their
 experience every N steps"). With ``n_step > 1`` the batch holds n-step items (laneshift.nstep),
@@ -28,7 +21,6 @@ from __future__ import annotations
 import dataclasses
 import time
 from dataclasses import dataclass
-from typing import Protocol
 
 import numpy as np
 
@@ -39,32 +31,7 @@ from laneshift.nstep import NStepAccumulator, NStepItem, check_nstep
 from .envs import make as make_env
 from .exploration import make_schedule
 from .policy import QPolicy
-
-
-class ExperienceSink(Protocol):
-    """Where experience goes: the replay server (transitions) and the learner (episode records)."""
-
-    def send_transitions(self, batch: wire.TransitionBatch) -> None: ...
-    def send_episode(self, record: wire.EpisodeRecord) -> None: ...
-    def flush(self) -> bool: ...
-
-
-class WeightsSource(Protocol):
-    """The learner's newest weights (wire bytes, verified by the worker)."""
-
-    def latest_weights(self) -> bytes | None: ...
-    def wait_weights(self, timeout: float) -> bytes | None: ...
-
-
-class RunControl(Protocol):
-    """The run's flow control (the replay's rate limiter) and its stop."""
-
-    def wait_insert_ok(self) -> None: ...
-    def stop_requested(self) -> bool: ...
-
-
-class ActorLinks(ExperienceSink, WeightsSource, RunControl, Protocol):
-    """All three seams, as one object (what the builder hands a worker)."""
+from .seams import ActorLinks, WeightsUpdate
 
 
 @dataclass
@@ -133,19 +100,21 @@ class EnvWorker:
 
     # ------------------------------------------------------------------ weights
 
-    def _apply(self, payload: bytes | None) -> bool:
-        if payload is None:
+    def _apply(self, update: WeightsUpdate) -> bool:
+        if update is None:
             return False
-        try:
-            weights = wire.decode_weights(payload)
-            if weights.version <= self.policy.version:
-                return False  # an older or repeated version (e.g. a query answer after an update)
-            self.policy.load(weights)
-            if not self.first_weights_sha256 and (not self.rehearsal or weights.phase == 2):
-                self.first_weights_sha256 = wire.tensors_digest(weights.tensors)
-        except (wire.WireError, ValueError):
+        if isinstance(update, wire.WireError):
             self.bad_weights += 1  # counted and ignored: keep acting with the weights we have
             return False
+        if update.version <= self.policy.version:
+            return False  # an older or repeated version (e.g. a query answer after an update)
+        try:
+            self.policy.load(update)
+        except ValueError:
+            self.bad_weights += 1  # another network's weights: counted and ignored, like a bad message
+            return False
+        if not self.first_weights_sha256 and (not self.rehearsal or update.phase == 2):
+            self.first_weights_sha256 = wire.tensors_digest(update.tensors)
         self.weight_updates += 1
         if self.uses_policy_vehicles:
             for env in self.envs:  # other vehicles driven by a copy of the agent's current model

@@ -4,11 +4,12 @@ What it is: the in-process runner. The components come from the same ``deploy.bu
 as in local and cluster mode; only where they run differs: workers and the learner are threads
 talking through in-memory links to a ReplayCore (one per shard with ``replay.shards`` > 1, each
 worker sending to its shard and the learner sampling all through ``learner.shards.ShardedReplay``,
-as over zenoh). The learner's links are its seams' in-memory adapter (``learner.seams``): typed
-values at the seams, and every message still goes through the wire encoder and decoder in
-between, so the contract is exercised as in a real run.
-Room: deploy, the wiring. May import: the contract, ``deploy.builder`` and the learner's seams
-(``learner.seams``, ``learner.shards``, ``learner.episodes``, ``learner.status``).
+as over zenoh). The links are the seams' in-memory adapters (``actors.seams``, ``learner.seams``):
+typed values at the seams, and every message still goes through the wire encoder and decoder
+in between, so the contract is exercised as in a real run.
+Room: deploy, the wiring. May import: the contract, ``deploy.builder``, the workers' seams
+(``actors.seams``) and the learner's (``learner.seams``, ``learner.shards``, ``learner.episodes``,
+``learner.status``).
 
     >>> from laneshift.config import load_run_config
     >>> cfg = load_run_config(overrides={"env.scenario": "lka", "train.env_steps": 2000})  # doctest: +SKIP
@@ -23,6 +24,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from laneshift import wire
+from laneshift.actors.seams import WeightsUpdate
 from laneshift.config import RunConfig
 from laneshift.learner.episodes import read_record
 from laneshift.learner.seams import EpisodeUpdate, PendingSample, ReplayThrough
@@ -47,6 +49,8 @@ class Board:
 
 
 class InProcessActorLinks:
+    """A worker's ``ActorLinks`` on the board: batches into its shard's core, weights decoded."""
+
     def __init__(self, board: Board, name: str):
         self.board, self.name = board, name
         self.core = board.cores[wire.shard_of(name, len(board.cores))]  # this worker's replay shard
@@ -61,14 +65,17 @@ class InProcessActorLinks:
     def flush(self) -> bool:
         return True  # send_transitions stored it before returning
 
-    def latest_weights(self) -> bytes | None:
+    def latest_weights(self) -> WeightsUpdate:
         with self.board.cond:
-            if self.board.weights and self.board.weights is not self._seen:
-                self._seen = self.board.weights
-                return self._seen
-        return None
+            if not self.board.weights or self.board.weights is self._seen:
+                return None
+            self._seen = self.board.weights
+        try:
+            return wire.decode_weights(self._seen)  # each worker decodes, as over zenoh
+        except wire.WireError as exc:
+            return exc
 
-    def wait_weights(self, timeout: float) -> bytes | None:
+    def wait_weights(self, timeout: float) -> WeightsUpdate:
         with self.board.cond:
             if self.board.weights is self._seen:
                 self.board.cond.wait(timeout)

@@ -8,9 +8,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from laneshift import wire
 from laneshift.actors.worker import expand_version_runs
 from laneshift.config import load_run_config
-from laneshift.deploy.inprocess import train_inprocess
+from laneshift.deploy.builder import Builder
+from laneshift.deploy.inprocess import Board, InProcessActorLinks, train_inprocess
+from laneshift.qnet import build_q_network, to_wire
 
 FAST = {"env.scenario": "lka", "actor.send_every": 50, "learner.hidden": "32,32", "learner.batch_size": 32,
         "learner.publish_every": 5, "replay.min_size": 100, "replay.samples_per_insert": 4,
@@ -62,6 +65,31 @@ def test_stop_return_ends_the_run_at_the_first_episode_that_reaches_it(tmp_path)
     reason = result["learner"]["stop_reason"]
     assert reason["criterion"] == "stop_return" and reason["episode"] == 1
     assert sum(w["env_steps"] for w in result["workers"]) < 100_000  # stopped long before the budget
+
+
+def test_the_worker_gets_decoded_weights_and_counts_those_it_cannot_use(tmp_path):
+    """The links decode each WEIGHTS message: the worker gets ``wire.Weights``, or the WireError
+    of a message that cannot be read; that one and another network's weights are counted in
+    ``bad_weights`` and the worker keeps acting with the weights it has."""
+    cfg = load_run_config(overrides={**FAST, "actor.workers": 1, "train.run_dir": str(tmp_path)})
+    builder = Builder(cfg)
+    board = Board(cores=[builder.replay_core(0)])
+    links, worker = InProcessActorLinks(board, "w0"), builder.env_worker(0)
+    schema = builder.spec.schema
+    try:
+        board.weights = b"not a weights message"
+        update = links.latest_weights()
+        assert isinstance(update, wire.WireError) and not worker._apply(update)
+        board.weights = to_wire(build_q_network(schema.obs_shape, schema.n_actions, (8,)), 1, 0, 0)
+        assert not worker._apply(links.latest_weights())  # another network's shapes
+        assert links.latest_weights() is None  # nothing new
+        board.weights = to_wire(build_q_network(schema.obs_shape, schema.n_actions, cfg.learner.hidden), 2, 0, 5)
+        update = links.latest_weights()
+        assert isinstance(update, wire.Weights) and (update.version, update.updates) == (2, 5)
+        assert worker._apply(update) and worker.policy.version == 2
+        assert (worker.bad_weights, worker.weight_updates) == (2, 1)
+    finally:
+        worker.close()
 
 
 def test_pixel_run_learns_from_frames_held_once_each(tmp_path):

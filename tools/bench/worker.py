@@ -25,8 +25,8 @@ from laneshift.tools.argtypes import positive_int
 class CountingLinks:
     """The worker's seams, answering at once: weights once, insert always allowed; counts bytes."""
 
-    def __init__(self, weights: bytes):
-        self._weights: bytes | None = weights
+    def __init__(self, weights: wire.Weights):
+        self._weights: wire.Weights | None = weights
         self.batches = self.bytes = self.episodes = 0
 
     def send_transitions(self, batch: wire.TransitionBatch) -> None:
@@ -39,11 +39,11 @@ class CountingLinks:
     def flush(self) -> bool:
         return True
 
-    def latest_weights(self) -> bytes | None:
+    def latest_weights(self) -> wire.Weights | None:
         w, self._weights = self._weights, None
         return w
 
-    def wait_weights(self, timeout: float) -> bytes | None:
+    def wait_weights(self, timeout: float) -> wire.Weights | None:
         return self.latest_weights()
 
     def wait_insert_ok(self) -> None:
@@ -56,7 +56,7 @@ class CountingLinks:
 def bench_worker(scenario: str, envs: int, steps: int, epsilon: float = 0.1) -> dict:
     from laneshift.config import load_run_config
     from laneshift.qnet import build_q_network  # the learner's network, for its weights
-    from laneshift.qnet import to_wire
+    from laneshift.qnet import weights_of
 
     from laneshift.deploy.builder import Builder
 
@@ -67,7 +67,7 @@ def bench_worker(scenario: str, envs: int, steps: int, epsilon: float = 0.1) -> 
     spec = builder.spec.schema
     net = build_q_network(spec.obs_shape, spec.n_actions, cfg.learner.hidden, cfg.learner.dueling,
                           cfg.learner.cnn)
-    links = CountingLinks(to_wire(net, 0, 0, 0))
+    links = CountingLinks(weights_of(net, 0, 0, 0))
     started, cpu = time.perf_counter(), time.process_time()
     summary = worker.run(links, steps)
     wall, cpu = time.perf_counter() - started, time.process_time() - cpu

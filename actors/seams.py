@@ -1,0 +1,54 @@
+"""The env worker's seams (Acme style): what the same ``EnvWorker`` needs from the world, over
+zenoh or in-process alike. Types only; the zenoh adapter is in ``links``, the in-process one in
+``laneshift.deploy.inprocess``, and the links own the encoding: every value crossing a seam is
+typed, never the wire's bytes.
+
+- ``ExperienceSink``: ``send_transitions(TransitionBatch)``, ``send_episode(EpisodeRecord)`` and
+  ``flush()`` (at the end of the budget: wait, bounded, until the replay server holds every batch
+  sent; False if it does not);
+- ``WeightsSource`` (Acme's VariableSource): ``latest_weights()`` (the newest unseen version,
+  never blocks) and ``wait_weights(timeout)``, each a ``WeightsUpdate``: the decoded
+  ``wire.Weights`` (version, rehearsal phase, update count, tensors by state-dict name), a
+  ``wire.WireError`` for a message that could not be read (the worker counts it and keeps the
+  weights it has), or None (nothing new);
+- ``RunControl``: ``wait_insert_ok()`` (blocks while the replay's rate limiter says the learner is
+  behind) and ``stop_requested() -> bool``;
+- ``ActorLinks``: all three as one object (what the builder hands a worker).
+
+Room: actors, the env-running component. May import: the contract; never another component.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol, TypeAlias
+
+from laneshift import wire
+
+#: What a weights seam returns: new weights, a message that could not be read, or nothing new.
+WeightsUpdate: TypeAlias = wire.Weights | wire.WireError | None
+
+
+class ExperienceSink(Protocol):
+    """Where experience goes: the replay server (transitions) and the learner (episode records)."""
+
+    def send_transitions(self, batch: wire.TransitionBatch) -> None: ...
+    def send_episode(self, record: wire.EpisodeRecord) -> None: ...
+    def flush(self) -> bool: ...
+
+
+class WeightsSource(Protocol):
+    """The learner's newest weights, decoded by the link."""
+
+    def latest_weights(self) -> WeightsUpdate: ...
+    def wait_weights(self, timeout: float) -> WeightsUpdate: ...
+
+
+class RunControl(Protocol):
+    """The run's flow control (the replay's rate limiter) and its stop."""
+
+    def wait_insert_ok(self) -> None: ...
+    def stop_requested(self) -> bool: ...
+
+
+class ActorLinks(ExperienceSink, WeightsSource, RunControl, Protocol):
+    """All three seams, as one object (what the builder hands a worker)."""
