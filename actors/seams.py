@@ -4,8 +4,9 @@ zenoh or in-process alike. Types only; the zenoh adapter is in ``links``, the in
 typed, never the wire's bytes.
 
 - ``ExperienceSink``: ``send_transitions(TransitionBatch)``, ``send_episode(EpisodeRecord)`` and
-  ``flush()`` (at the end of the budget: wait, bounded, until the replay server holds every batch
-  sent; False if it does not);
+  ``flush() -> Delivery`` (at the end of the worker's run: wait, bounded, until the replay server
+  holds every batch sent, sending again what it lacks; after a stop the wait is short, a couple
+  of seconds. The ``Delivery`` says what it still lacked then: counted lost, never silent);
 - ``WeightsSource`` (Acme's VariableSource): ``latest_weights()`` (the newest unseen version,
   never blocks) and ``wait_weights(timeout)``, each a ``WeightsUpdate``: the decoded
   ``wire.Weights`` (version, rehearsal phase, update count, tensors by state-dict name), a
@@ -20,6 +21,7 @@ Room: actors, the env-running component. May import: the contract; never another
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Protocol, TypeAlias
 
 from laneshift import wire
@@ -28,12 +30,26 @@ from laneshift import wire
 WeightsUpdate: TypeAlias = wire.Weights | wire.WireError | None
 
 
+@dataclass(frozen=True)
+class Delivery:
+    """What a flush left undelivered: the batches (and their items) the replay server did not hold
+    when the flush ended. Nothing sent again after it: they are lost, and counted so."""
+
+    undelivered_batches: int = 0
+    undelivered_items: int = 0
+
+    @property
+    def complete(self) -> bool:
+        """True when the replay server holds every batch sent."""
+        return self.undelivered_batches == 0
+
+
 class ExperienceSink(Protocol):
     """Where experience goes: the replay server (transitions) and the learner (episode records)."""
 
     def send_transitions(self, batch: wire.TransitionBatch) -> None: ...
     def send_episode(self, record: wire.EpisodeRecord) -> None: ...
-    def flush(self) -> bool: ...
+    def flush(self) -> Delivery: ...
 
 
 class WeightsSource(Protocol):

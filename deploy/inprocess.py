@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from laneshift import wire
-from laneshift.actors.seams import WeightsUpdate
+from laneshift.actors.seams import Delivery, WeightsUpdate
 from laneshift.config import RunConfig
 from laneshift.learner.episodes import read_record
 from laneshift.learner.seams import EpisodeUpdate, PendingSample, ReplayThrough
@@ -62,8 +62,8 @@ class InProcessActorLinks:
     def send_episode(self, record: wire.EpisodeRecord) -> None:
         self.board.episodes.append(wire.encode_episode(record))
 
-    def flush(self) -> bool:
-        return True  # send_transitions stored it before returning
+    def flush(self) -> Delivery:
+        return Delivery()  # send_transitions stored it before returning
 
     def latest_weights(self) -> WeightsUpdate:
         with self.board.cond:

@@ -7,6 +7,7 @@ the code under test needs."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from laneshift import wire
 from laneshift.actors.worker import expand_version_runs
@@ -90,6 +91,70 @@ def test_the_worker_gets_decoded_weights_and_counts_those_it_cannot_use(tmp_path
         assert (worker.bad_weights, worker.weight_updates) == (2, 1)
     finally:
         worker.close()
+
+
+class StoppedLinks(InProcessActorLinks):
+    """A worker's in-memory links whose run is stopped (the launcher's graceful end: the stop
+    message) the moment the worker sends batch ``at_seq``, or ends its first episode."""
+
+    def __init__(self, board: Board, name: str, at_seq: int | None = None, at_episode: bool = False):
+        super().__init__(board, name)
+        self.at_seq, self.at_episode = at_seq, at_episode
+        self.sent: list[wire.TransitionBatch] = []
+        self.first_episode: wire.EpisodeRecord | None = None
+
+    def send_transitions(self, batch: wire.TransitionBatch) -> None:
+        super().send_transitions(batch)
+        self.sent.append(batch)
+        if batch.seq == self.at_seq:
+            self.board.stop.set()
+
+    def send_episode(self, record: wire.EpisodeRecord) -> None:
+        super().send_episode(record)
+        if self.at_episode and self.first_episode is None:
+            self.first_episode = record
+            self.board.stop.set()
+
+
+def _stopped_worker(tmp_path, links_args: dict, **overrides) -> tuple[dict, StoppedLinks, dict]:
+    """One real worker (LKA) against a real replay core, stopped as ``links_args`` says; its
+    summary, its links and the core's record of it."""
+    cfg = load_run_config(overrides={**FAST, "actor.workers": 1, "train.run_dir": str(tmp_path), **overrides})
+    builder = Builder(cfg)
+    board = Board(cores=[builder.replay_core(0)])
+    schema = builder.spec.schema
+    net = build_q_network(schema.obs_shape, schema.n_actions, cfg.learner.hidden)
+    board.weights = to_wire(net, 0, 0, 0)  # version 0; no learner publishes another
+    links = StoppedLinks(board, "w0", **links_args)
+    worker = builder.env_worker(0)
+    try:
+        summary = worker.run(links, 10_000).as_dict()
+    finally:
+        worker.close()
+    return summary, links, board.cores[0].stats(all_actors=True)["actors"]["w0"]
+
+
+@pytest.mark.parametrize("parallel", ["async", "sync"])
+def test_a_stopped_worker_sends_the_n_step_items_it_still_held(tmp_path, parallel):
+    """Stopped right after its first batch (a sync worker while it waits for the next weights):
+    the items of the last n - 1 steps of each env, whose n rewards are not all known yet, go
+    out in one last batch, so every env step made is stored (they used to be dropped)."""
+    summary, links, stored = _stopped_worker(tmp_path, {"at_seq": 0}, **{"train.parallel": parallel,
+                                                                         "learner.n_step": 3})
+    assert [len(b) for b in links.sent] == [50 - 2, 2]  # the first window completes at step 3
+    assert summary["env_steps"] == 50 and summary["batches"] == 2
+    assert (stored["stored"], stored["env_steps"], stored["lost_items"]) == (50, 50, 0)
+    assert (summary["undelivered_batches"], summary["undelivered_items"]) == (0, 0)
+
+
+def test_a_stop_ends_the_batch_being_filled_and_sends_it(tmp_path):
+    """The stop comes in the middle of a batch (at the first episode's end, before send_every
+    steps): the worker steps no further and sends the shorter batch it holds."""
+    summary, links, stored = _stopped_worker(tmp_path, {"at_episode": True}, **{"env.max_steps": 20})
+    steps = links.first_episode.env_steps
+    assert steps <= 20 < 50
+    assert summary["env_steps"] == steps and [len(b) for b in links.sent] == [steps]
+    assert (stored["stored"], stored["env_steps"], stored["lost_items"]) == (steps, steps, 0)
 
 
 def test_pixel_run_learns_from_frames_held_once_each(tmp_path):

@@ -5,7 +5,7 @@ epsilon-greedily with a learner-shaped network and encoding every batch it sends
 core; its links only count what it sends (nothing downstream is measured: the replay server and
 the learner have their own benchmarks). Several envs per worker share one batched forward pass
 per step, which is what the 4 and 16 rows show.
-Room: the tools (benchmarks). May import: the contract, ``deploy`` and the argparse types (``laneshift.tools.argtypes``).
+Room: the tools (benchmarks). May import: the contract, ``deploy``, the worker's seams (``actors.seams``) and the argparse types (``laneshift.tools.argtypes``).
 
     laneshift bench worker --envs 1,4,16 --steps 4000 --json
 """
@@ -19,6 +19,7 @@ import sys
 import time
 
 from laneshift import wire
+from laneshift.actors.seams import Delivery
 from laneshift.tools.argtypes import positive_int
 
 
@@ -36,8 +37,8 @@ class CountingLinks:
     def send_episode(self, record: wire.EpisodeRecord) -> None:
         self.episodes += 1
 
-    def flush(self) -> bool:
-        return True
+    def flush(self) -> Delivery:
+        return Delivery()
 
     def latest_weights(self) -> wire.Weights | None:
         w, self._weights = self._weights, None
