@@ -43,6 +43,11 @@ FLUSH_TIMEOUT_S = 120.0
 #: at the end is lost and counted (``seams.Delivery``).
 STOP_FLUSH_S = 2.0
 STOP_RESEND_AFTER_S = 0.5
+#: While a worker waits for weights (sync mode: after each batch, for the round that batch is part
+#: of) with batches unacknowledged, it asks the server at most this often, and sends again what it
+#: lacks once nothing was put for RESEND_AFTER_S: a lost batch would otherwise stall the round
+#: (the next query was due ACK_EVERY batches later, and the worker sends none while it waits).
+WAIT_ACK_EVERY_S = 0.5
 
 
 class ZenohActorLinks:
@@ -64,6 +69,7 @@ class ZenohActorLinks:
         # Sent, not yet known stored: seq -> (the message's bytes, its items), oldest first (at
         # most MAX_IN_FLIGHT).
         self._unacked: collections.OrderedDict[int, tuple[bytes, int]] = collections.OrderedDict()
+        self._last_ack = 0.0  # when the server was last asked what it holds
         self._put_at = 0.0  # when the last batch was put (sent or sent again)
         self._next_seq = 0  # the seq after the last one sent
         self._server: str | None = None  # the replay server process that answered last
@@ -128,6 +134,7 @@ class ZenohActorLinks:
         unacknowledged, None when the server did not answer. ``timeout_s`` bounds the query and
         each resend's wait for a subscriber (the links' ``timeout_s`` when None)."""
         unacked = self._unacked
+        self._last_ack = time.monotonic()
         body = self._ask({"cmd": "actor_state", "actor": self.name,
                           "from_seq": next(iter(unacked)) if unacked else self._next_seq}, timeout_s)
         if body is None:
@@ -194,7 +201,7 @@ class ZenohActorLinks:
         return _weights_update(self._weights.take())
 
     def wait_weights(self, timeout: float) -> WeightsUpdate:
-        data = self._weights.wait(timeout)
+        data = pushed = self._weights.wait(timeout)
         if data is None and time.monotonic() - self._last_query > 1.0:
             # Nothing pushed to us (we joined late, or reconnected): ask for the latest.
             self._last_query = time.monotonic()
@@ -203,6 +210,10 @@ class ZenohActorLinks:
             self._weights_wait.missed()
         else:
             self._weights_wait.answered()
+        if pushed is None and self._unacked and time.monotonic() - self._last_ack >= WAIT_ACK_EVERY_S:
+            # Still waiting (sync mode: for the round its last batch is part of). If that batch
+            # was lost on the way, the round waits for it: ask what the server lacks, send it again.
+            self.acknowledge(idle_s=RESEND_AFTER_S)
         return _weights_update(data)
 
     def wait_insert_ok(self) -> None:

@@ -11,7 +11,9 @@ typed, never the wire's bytes.
   never blocks) and ``wait_weights(timeout)``, each a ``WeightsUpdate``: the decoded
   ``wire.Weights`` (version, rehearsal phase, update count, tensors by state-dict name), a
   ``wire.WireError`` for a message that could not be read (the worker counts it and keeps the
-  weights it has), or None (nothing new);
+  weights it has), or None (nothing new). While a worker waits for weights (sync mode: after
+  each batch) the link also checks what the replay server holds and sends again what it lacks,
+  so a lost batch never stalls a round;
 - ``RunControl``: ``wait_insert_ok()`` (blocks while the replay's rate limiter says the learner is
   behind) and ``stop_requested() -> bool``;
 - ``ActorLinks``: all three as one object (what the builder hands a worker).

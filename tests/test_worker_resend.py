@@ -3,9 +3,11 @@ does not hold (killed with -9 while they were on their way, or dropped by a conn
 sent again from the worker's own buffer, with the same seq, so the server ends with every batch
 once: made == stored, 0 lost, and the copies it already had are ignored and counted as duplicates.
 
-Also when the worker ends early: a worker stopped gracefully (the run's stop message) sends
-again, within a bounded flush, what the server lacks, and reports what it could not deliver. A
-lost put is made by ``DropOnce``, the worker's real publisher with one batch's put left out.
+Also when the worker ends early or waits: a worker stopped gracefully (the run's stop message)
+sends again, within a bounded flush, what the server lacks, and reports what it could not deliver;
+a sync-mode worker waiting for its round's weights sends again a batch lost on its way (that
+round waited for it for ever). A lost put is made by ``DropOnce``, the worker's real publisher
+with one batch's put left out.
 
 Room: tests, system (real Ray, zenoh or laneshift processes; the `system` marker). May import:
 laneshift (any floor), pytest, numpy, the standard library and what the code under test needs.
@@ -24,7 +26,7 @@ import numpy as np
 import pytest
 
 from laneshift import transport, wire
-from laneshift.actors.links import MAX_IN_FLIGHT, STOP_FLUSH_S, ZenohActorLinks
+from laneshift.actors.links import MAX_IN_FLIGHT, RESEND_AFTER_S, STOP_FLUSH_S, ZenohActorLinks
 from laneshift.actors.seams import Delivery
 from laneshift.config import TransportConfig, load_run_config, save_run_config
 from laneshift.deploy.builder import Builder
@@ -276,6 +278,47 @@ class Run(threading.Thread):
 
     def run(self) -> None:
         self.summary = self.worker.run(self.links, self.env_steps)
+
+
+def test_a_sync_worker_waiting_for_its_rounds_weights_sends_a_lost_batch_again(tmp_path):
+    """Sync mode: the learner publishes version v + 1 once the server holds the worker's batch of
+    version v. Batch 1 is lost on its way: the worker, waiting for version 2, asks the server
+    and sends it again, so the round goes on (the next ask was due 16 batches later, which a
+    sync worker never sends while it waits: the run stalled)."""
+    rounds, per_batch = 5, 16
+    server = Server(tmp_path, **{"replay.checkpoint_every_s": 0, "train.parallel": "sync", "actor.workers": 1,
+                                 "actor.envs_per_worker": 1, "actor.send_every": per_batch, "learner.hidden": "16"})
+    cfg = TransportConfig(router=server.endpoint, run_id=server.cfg.transport.run_id)
+    try:
+        with transport.open_session(cfg) as session, transport.open_session(cfg) as theirs:
+            worker, learner = _worker(server, theirs)
+            links = ZenohActorLinks(session, cfg.run_id, "w0", timeout_s=2.0)
+            drop = DropOnce(links, 1)
+            run = Run(worker, links, rounds * per_batch)
+            run.start()
+            waits = []
+            for version in range(rounds):
+                learner.publish(version)
+                started = time.monotonic()
+                # The learner's round: until the server holds the worker's batch of this version.
+                held = transport.wait_for(lambda: server.stats(theirs).get("actors", {}).get("w0", {}).get(
+                    "last_seq", -1) >= version, 30)
+                assert held, f"round {version}: the server never got the worker's batch (the run stalls)"
+                waits.append(time.monotonic() - started)
+            run.join(60)
+            assert not run.is_alive() and drop.dropped
+            assert waits[1] <= RESEND_AFTER_S + 5.0, waits  # the lost batch came again within seconds
+            assert links.resent >= 1
+            summary = run.summary.as_dict()
+            assert summary["version_runs"] == [[v, 1] for v in range(rounds)]
+            assert (summary["undelivered_batches"], summary["undelivered_items"]) == (0, 0)
+            w0 = server.stats(theirs)["actors"]["w0"]
+            assert (w0["last_seq"], w0["stored"], w0["lost_batches"]) == (rounds - 1, rounds * per_batch, 0), w0
+            learner.stop.set()
+            links.close()
+            worker.close()
+    finally:
+        server.group.stop_all()
 
 
 def test_a_stopped_worker_whose_server_does_not_answer_ends_in_seconds_and_counts_what_it_could_not_deliver(
