@@ -6,7 +6,8 @@ typed, never the wire's bytes.
 - ``ExperienceSink``: ``send_transitions(TransitionBatch)``, ``send_episode(EpisodeRecord)`` and
   ``flush() -> Delivery`` (at the end of the worker's run: wait, bounded, until the replay server
   holds every batch sent, sending again what it lacks; after a stop the wait is short, a couple
-  of seconds. The ``Delivery`` says what it still lacked then: counted lost, never silent);
+  of seconds. The ``Delivery`` says what the server had not confirmed then: the worker counts
+  it lost and says so, never silently);
 - ``WeightsSource`` (Acme's VariableSource): ``latest_weights()`` (the newest unseen version,
   never blocks) and ``wait_weights(timeout)``, each a ``WeightsUpdate``: the decoded
   ``wire.Weights`` (version, rehearsal phase, update count, tensors by state-dict name), a
@@ -34,8 +35,10 @@ WeightsUpdate: TypeAlias = wire.Weights | wire.WireError | None
 
 @dataclass(frozen=True)
 class Delivery:
-    """What a flush left undelivered: the batches (and their items) the replay server did not hold
-    when the flush ended. Nothing sent again after it: they are lost, and counted so."""
+    """What a flush left undelivered: the batches (and their items) the replay server had not
+    confirmed holding when the flush ended. Nothing is sent again after it: the worker counts them
+    lost. (A server too slow to answer in time may hold some after all; the run's own lost count
+    is the server's record, so it stays exact either way.)"""
 
     undelivered_batches: int = 0
     undelivered_items: int = 0

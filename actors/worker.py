@@ -15,8 +15,8 @@ weights; in ``async`` mode it takes the newest version if one came.
 A stop (the run's stop message: the launcher's graceful end, SIGTERM or SIGINT) ends the batch
 being filled: its items and the n-step items still pending go out as a last, shorter batch, and
 the worker flushes (bounded: a couple of seconds after a stop) like one whose budget is spent.
-What the replay server still lacks then is in the summary (``undelivered_batches``,
-``undelivered_items``) and said in the worker's log: counted lost, never silent.
+What the replay server has not confirmed then is counted lost in the summary
+(``undelivered_batches``, ``undelivered_items``) and said in the worker's log, never silently.
 
 Room: actors, the env-running component. May import: the contract and laneshift.actors; never
 another component.
@@ -52,8 +52,9 @@ class WorkerSummary:
     first_weights_sha256: str  # digest of the first weights acted with (rehearsal: the phase-1 network)
     wall_s: float
     rate_limited_s: float = 0.0  # blocked by the replay's rate limiter: the learner bounds the run
-    #: Sent, and not held by the replay server when the final flush ended (a stop, a server down):
-    #: lost, and counted (the replay's gaps and the launcher's tail count hold the same batches).
+    #: Sent, and not confirmed held by the replay server when the final flush ended (a stop, a
+    #: server down or too slow to answer): counted lost here; the run's lost count is the server's
+    #: record (its gaps, and the launcher's count of the batches after its newest).
     undelivered_batches: int = 0
     undelivered_items: int = 0
 
@@ -218,11 +219,12 @@ class EnvWorker:
             else:
                 self._apply(links.latest_weights())
         # What the server lacks is sent again (after a stop for a couple of seconds only); what it
-        # still lacks then is lost, and counted.
+        # has not confirmed then is counted lost, and said.
         delivery = links.flush()
         if not delivery.complete:
             print(f"{self.name}: {delivery.undelivered_batches} batches ({delivery.undelivered_items} items) sent "
-                  f"and not held by the replay server when this worker ended: counted lost", flush=True)
+                  f"and not confirmed by the replay server when this worker ended: counted lost (the run's "
+                  f"summary counts what the server holds)", flush=True)
         return self._summary(steps, episodes, seq, versions, started, rate_limited_s, delivery)
 
     def _batch(self, seq: int, steps: int, items: list[NStepItem]) -> wire.TransitionBatch:

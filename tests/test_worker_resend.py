@@ -352,8 +352,9 @@ def test_a_stopped_worker_whose_server_does_not_answer_ends_in_seconds_and_count
             assert summary["batches"] == links._next_seq
             assert 2 <= summary["undelivered_batches"] == len(links._unacked), summary
             assert summary["undelivered_items"] == sum(items for _, items in links._unacked.values()) > 0
+            said = capsys.readouterr().out
             assert (f"w0: {summary['undelivered_batches']} batches ({summary['undelivered_items']} items) sent and "
-                    f"not held by the replay server when this worker ended: counted lost") in capsys.readouterr().out
+                    f"not confirmed by the replay server when this worker ended: counted lost") in said
             os.kill(server.pid, signal.SIGCONT)
             learner.stop.set()
             links.close()
