@@ -20,7 +20,8 @@ typed; the adapters own the encoding (the wire's bytes never reach the learner's
 - ``LearnerLinks``: all three as one object; ``ReplayThrough``: the ``ReplayClient`` half of a
   LearnerLinks, forwarded to its ``replay``.
 
-Room: learner (component). May import: the contract; never another component.
+Room: learner (component). May import: the contract and, for its type, ``status``; never another
+component.
 """
 
 from __future__ import annotations
