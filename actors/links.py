@@ -1,5 +1,7 @@
-"""The worker's seams over zenoh: transitions out (BLOCK, held until the replay server has
-them, sent again if it lacks them), newest weights in, control in.
+"""The worker's seams (``seams.ActorLinks``) over zenoh: transitions out (BLOCK, held until the
+replay server has them, sent again if it lacks them), newest weights in (decoded here: the worker
+gets ``wire.Weights``, or the ``wire.WireError`` of a message it cannot read), control in. The
+encoding and decoding of every message the worker sends or takes is here.
 
     >>> links = ZenohActorLinks(session, "run", "w0")  # doctest: +SKIP
     >>> worker.run(links, env_steps=10_000)  # doctest: +SKIP
@@ -17,6 +19,8 @@ import zenoh
 
 from laneshift import transport, wire
 
+from .seams import Delivery, WeightsUpdate
+
 
 #: Batches a worker may have sent that the replay server has not stored yet, and how often
 #: (in batches) it asks: a bound on what a cut link can queue, at one query per 16 batches. The
@@ -33,6 +37,17 @@ RESEND_MAX_S = 30.0
 #: How long a worker whose budget is spent waits for the server to hold all it sent (a replay
 #: server that restarts takes a few seconds; it is given much more).
 FLUSH_TIMEOUT_S = 120.0
+#: After a stop (the launcher's graceful end) a flush waits at most this long, and sends again
+#: what the server lacks once nothing was put for STOP_RESEND_AFTER_S (the worker sends nothing
+#: new then, so a batch still missing is lost on the way, not late). What the server still lacks
+#: at the end is lost and counted (``seams.Delivery``).
+STOP_FLUSH_S = 2.0
+STOP_RESEND_AFTER_S = 0.5
+#: While a worker waits for weights (sync mode: after each batch, for the round that batch is part
+#: of) with batches unacknowledged, it asks the server at most this often, and sends again what it
+#: lacks once nothing was put for RESEND_AFTER_S: a lost batch would otherwise stall the round
+#: (the next query was due ACK_EVERY batches later, and the worker sends none while it waits).
+WAIT_ACK_EVERY_S = 0.5
 
 
 class ZenohActorLinks:
@@ -51,8 +66,11 @@ class ZenohActorLinks:
         self._last_query = 0.0
         self.name = name
         self._sent = 0  # batches sent by this session (resends not counted)
-        # Sent, not yet known stored: seq -> the message's bytes, oldest first (at most MAX_IN_FLIGHT).
-        self._unacked: collections.OrderedDict[int, bytes] = collections.OrderedDict()
+        # Sent, not yet known stored: seq -> (the message's bytes, its items), oldest first (at
+        # most MAX_IN_FLIGHT).
+        self._unacked: collections.OrderedDict[int, tuple[bytes, int]] = collections.OrderedDict()
+        self._last_ack = 0.0  # when the server was last asked what it holds
+        self._put_at = 0.0  # when the last batch was put (sent or sent again)
         self._next_seq = 0  # the seq after the last one sent
         self._server: str | None = None  # the replay server process that answered last
         self._progress = (-1, time.monotonic(), RESEND_AFTER_S)  # (its next_seq, since when, resend after)
@@ -71,20 +89,22 @@ class ZenohActorLinks:
 
     def send_transitions(self, batch: wire.TransitionBatch) -> None:
         payload = wire.encode_transitions(batch)
-        if self._sent % ACK_EVERY == 0 or len(self._unacked) >= MAX_IN_FLIGHT:
-            self._bound_in_flight()
+        if (self._sent % ACK_EVERY == 0 or len(self._unacked) >= MAX_IN_FLIGHT) and not self.stop_requested():
+            self._bound_in_flight()  # (after a stop the flush that follows asks)
         self._put(payload)
-        self._unacked[batch.seq] = payload
+        self._unacked[batch.seq] = (payload, len(batch))
         self._next_seq = batch.seq + 1
         self._sent += 1
 
-    def _put(self, payload: bytes) -> None:
+    def _put(self, payload: bytes, wait_s: float | None = None) -> None:
         if not self._transitions.matching_status.matching:
             # Nobody subscribed as far as this session knows (the first batch, or the router or
             # replay server is coming back): a put now would go nowhere, so wait for the match
-            # (bounded: after timeout_s it is sent anyway; it stays held and is sent again).
-            transport.wait_matching(self._transitions, self.timeout_s)
+            # (bounded: after timeout_s, or ``wait_s``, it is sent anyway; it stays held and is
+            # sent again).
+            transport.wait_matching(self._transitions, self.timeout_s if wait_s is None else wait_s)
         self._transitions.put(payload)
+        self._put_at = time.monotonic()
 
     def stored_state(self) -> dict[str, int] | None:
         """What the replay server stored of this worker: ``{"env_steps", "next_seq"}`` (zeros for
@@ -92,9 +112,9 @@ class ZenohActorLinks:
         body = self._ask({"cmd": "actor_state", "actor": self.name})
         return {"env_steps": int(body["env_steps"]), "next_seq": int(body["next_seq"])} if body else None
 
-    def _ask(self, command: dict) -> dict | None:
+    def _ask(self, command: dict, timeout_s: float | None = None) -> dict | None:
         reply = transport.query(self.session, wire.replay_control_key(self.replay_ns), wire.encode_json(command),
-                                self.timeout_s)
+                                self.timeout_s if timeout_s is None else timeout_s)
         if reply is None:
             self._replay_wait.missed()
         else:
@@ -105,15 +125,18 @@ class ZenohActorLinks:
             return None
         return body if body.get("ok") else None
 
-    def acknowledge(self) -> bool | None:
+    def acknowledge(self, timeout_s: float | None = None, idle_s: float | None = None) -> bool | None:
         """Ask the replay server what it holds of this worker's batches; forget those it has; send
         again those it lacks: the seqs it counted lost (a link reset, a restart whose log ended
         before them), and, when nothing after them shows a gap (the server restarted, or no
-        progress for RESEND_AFTER_S), every batch after its newest. True when nothing is left
-        unacknowledged, None when the server did not answer."""
+        progress for RESEND_AFTER_S, or, with ``idle_s``, nothing put for that long: the worker
+        has stopped sending), every batch after its newest. True when nothing is left
+        unacknowledged, None when the server did not answer. ``timeout_s`` bounds the query and
+        each resend's wait for a subscriber (the links' ``timeout_s`` when None)."""
         unacked = self._unacked
+        self._last_ack = time.monotonic()
         body = self._ask({"cmd": "actor_state", "actor": self.name,
-                          "from_seq": next(iter(unacked)) if unacked else self._next_seq})
+                          "from_seq": next(iter(unacked)) if unacked else self._next_seq}, timeout_s)
         if body is None:
             return None
         next_seq, missing = int(body["next_seq"]), {int(s) for s in body.get("missing", ())}
@@ -128,12 +151,14 @@ class ZenohActorLinks:
         elif now - since >= after:  # stalled: the tail may have died on the way
             again += tail
             self._progress = (next_seq, now, min(2 * after, RESEND_MAX_S))
+        if idle_s is not None and now - self._put_at >= idle_s:  # nothing is on its way: what it lacks is lost
+            again += tail
         if server != self._server:
             if self._server is not None:  # a new server process: what was on its way to the old one is gone
                 again += tail
             self._server = server
         for seq in sorted(set(again)):
-            self._put(unacked[seq])
+            self._put(unacked[seq][0], timeout_s)
             self.resent += 1
         return not unacked
 
@@ -149,25 +174,34 @@ class ZenohActorLinks:
             time.sleep(0.05)
             self.acknowledge()
 
-    def flush(self, timeout_s: float = FLUSH_TIMEOUT_S) -> bool:
-        """At the end of the budget: wait (at most ``timeout_s``, or until a stop) until the replay
-        server holds every batch this worker sent, sending again what it lacks. False if some were
-        still missing then (the launcher counts them lost)."""
+    def flush(self, timeout_s: float = FLUSH_TIMEOUT_S) -> Delivery:
+        """At the end of the worker's run: wait (at most ``timeout_s``; once a stop is seen, at most
+        STOP_FLUSH_S more) until the replay server holds every batch this worker sent, sending
+        again what it lacks. The ``Delivery`` says what it still lacked then: lost (the replay's
+        gaps and the launcher's count of the batches after the server's newest count them)."""
         deadline = time.monotonic() + timeout_s
-        while not self.acknowledge():
-            if time.monotonic() >= deadline or self.stop_requested():
-                return False
-            time.sleep(0.1)
-        return True
+        stopped = False
+        while self._unacked:
+            if not stopped and self.stop_requested():
+                stopped = True  # a graceful end: a short wait, then the resends go out sooner
+                deadline = min(deadline, time.monotonic() + STOP_FLUSH_S)
+            left = deadline - time.monotonic()
+            if left <= 0:
+                break
+            if self.acknowledge(timeout_s=min(self.timeout_s, max(left, 0.1)),
+                                idle_s=STOP_RESEND_AFTER_S if stopped else None):
+                break
+            time.sleep(min(0.1, max(0.0, deadline - time.monotonic())))
+        return Delivery(len(self._unacked), sum(items for _, items in self._unacked.values()))
 
     def send_episode(self, record: wire.EpisodeRecord) -> None:
         self._episodes.put(wire.encode_episode(record))
 
-    def latest_weights(self) -> bytes | None:
-        return self._weights.take()
+    def latest_weights(self) -> WeightsUpdate:
+        return _weights_update(self._weights.take())
 
-    def wait_weights(self, timeout: float) -> bytes | None:
-        data = self._weights.wait(timeout)
+    def wait_weights(self, timeout: float) -> WeightsUpdate:
+        data = pushed = self._weights.wait(timeout)
         if data is None and time.monotonic() - self._last_query > 1.0:
             # Nothing pushed to us (we joined late, or reconnected): ask for the latest.
             self._last_query = time.monotonic()
@@ -176,7 +210,11 @@ class ZenohActorLinks:
             self._weights_wait.missed()
         else:
             self._weights_wait.answered()
-        return data
+        if pushed is None and self._unacked and time.monotonic() - self._last_ack >= WAIT_ACK_EVERY_S:
+            # Still waiting (sync mode: for the round its last batch is part of). If that batch
+            # was lost on the way, the round waits for it: ask what the server lacks, send it again.
+            self.acknowledge(idle_s=RESEND_AFTER_S)
+        return _weights_update(data)
 
     def wait_insert_ok(self) -> None:
         """Block while the replay server says the learner is too far behind (rate limiter)."""
@@ -203,3 +241,13 @@ class ZenohActorLinks:
         self._weights.close()
         self._stop.close()
         self._flow.close()
+
+
+def _weights_update(data: bytes | None) -> WeightsUpdate:
+    """A WEIGHTS message decoded; the WireError of one that cannot be read (the worker counts it)."""
+    if data is None:
+        return None
+    try:
+        return wire.decode_weights(data)
+    except wire.WireError as exc:
+        return exc

@@ -1,23 +1,22 @@
 """An env worker: runs env copies, acts epsilon-greedily with its latest weights, sends batches.
 
-The worker only knows three tiny seams (Acme style), so the same class runs inside a Ray actor
-over zenoh (``ZenohActorLinks``) and in-process in unit tests (``laneshift.deploy.inprocess``);
-the links own the encoding:
-
-- ``ExperienceSink``: ``send_transitions(TransitionBatch)``, ``send_episode(EpisodeRecord)`` and
-  ``flush()`` (at the end of the budget: wait, bounded, until the replay server holds every batch
-  sent; False if it does not);
-- ``WeightsSource`` (Acme's VariableSource): ``latest_weights() -> bytes | None`` (newest unseen
-  version, never blocks) and ``wait_weights(timeout) -> bytes | None``. They stay the wire's
-  safetensors bytes because the worker itself verifies them and counts the ones it refuses;
-- ``RunControl``: ``wait_insert_ok()`` (blocks while the replay's rate limiter says the learner is
-  behind) and ``stop_requested() -> bool``.
+The worker only knows the three tiny seams of ``seams`` (Acme style: ``ExperienceSink``,
+``WeightsSource``, ``RunControl``, as one ``ActorLinks``), so the same class runs inside a Ray
+actor over zenoh (``links.ZenohActorLinks``) and in-process in unit tests
+(``laneshift.deploy.inprocess``); the links own the encoding, and what crosses is typed:
+transitions batches and episode records out, decoded weights in.
 
 Every ``send_every`` env steps it publishes one transitions batch (MATLAB: "workers send their
 experience every N steps"). With ``n_step > 1`` the batch holds n-step items (laneshift.nstep),
 each sent once its n rewards are known, so a batch can hold up to n - 1 items fewer or more. In
 ``sync`` mode it then waits for the next weights version, so no step is ever taken with stale
 weights; in ``async`` mode it takes the newest version if one came.
+
+A stop (the run's stop message: the launcher's graceful end, SIGTERM or SIGINT) ends the batch
+being filled: its items and the n-step items still pending go out as a last, shorter batch, and
+the worker flushes (bounded: a couple of seconds after a stop) like one whose budget is spent.
+What the replay server has not confirmed then is counted lost in the summary
+(``undelivered_batches``, ``undelivered_items``) and said in the worker's log, never silently.
 
 Room: actors, the env-running component. May import: the contract and laneshift.actors; never
 another component.
@@ -28,7 +27,6 @@ from __future__ import annotations
 import dataclasses
 import time
 from dataclasses import dataclass
-from typing import Protocol
 
 import numpy as np
 
@@ -39,32 +37,7 @@ from laneshift.nstep import NStepAccumulator, NStepItem, check_nstep
 from .envs import make as make_env
 from .exploration import make_schedule
 from .policy import QPolicy
-
-
-class ExperienceSink(Protocol):
-    """Where experience goes: the replay server (transitions) and the learner (episode records)."""
-
-    def send_transitions(self, batch: wire.TransitionBatch) -> None: ...
-    def send_episode(self, record: wire.EpisodeRecord) -> None: ...
-    def flush(self) -> bool: ...
-
-
-class WeightsSource(Protocol):
-    """The learner's newest weights (wire bytes, verified by the worker)."""
-
-    def latest_weights(self) -> bytes | None: ...
-    def wait_weights(self, timeout: float) -> bytes | None: ...
-
-
-class RunControl(Protocol):
-    """The run's flow control (the replay's rate limiter) and its stop."""
-
-    def wait_insert_ok(self) -> None: ...
-    def stop_requested(self) -> bool: ...
-
-
-class ActorLinks(ExperienceSink, WeightsSource, RunControl, Protocol):
-    """All three seams, as one object (what the builder hands a worker)."""
+from .seams import ActorLinks, Delivery, WeightsUpdate
 
 
 @dataclass
@@ -79,6 +52,11 @@ class WorkerSummary:
     first_weights_sha256: str  # digest of the first weights acted with (rehearsal: the phase-1 network)
     wall_s: float
     rate_limited_s: float = 0.0  # blocked by the replay's rate limiter: the learner bounds the run
+    #: Sent, and not confirmed held by the replay server when the final flush ended (a stop, a
+    #: server down or too slow to answer): counted lost here; the run's lost count is the server's
+    #: record (its gaps, and the launcher's count of the batches after its newest).
+    undelivered_batches: int = 0
+    undelivered_items: int = 0
 
     def as_dict(self) -> dict:
         """JSON-ready; ``versions_used`` (one entry per batch sent, 23k for a 750k-step worker)
@@ -133,19 +111,21 @@ class EnvWorker:
 
     # ------------------------------------------------------------------ weights
 
-    def _apply(self, payload: bytes | None) -> bool:
-        if payload is None:
+    def _apply(self, update: WeightsUpdate) -> bool:
+        if update is None:
             return False
-        try:
-            weights = wire.decode_weights(payload)
-            if weights.version <= self.policy.version:
-                return False  # an older or repeated version (e.g. a query answer after an update)
-            self.policy.load(weights)
-            if not self.first_weights_sha256 and (not self.rehearsal or weights.phase == 2):
-                self.first_weights_sha256 = wire.tensors_digest(weights.tensors)
-        except (wire.WireError, ValueError):
+        if isinstance(update, wire.WireError):
             self.bad_weights += 1  # counted and ignored: keep acting with the weights we have
             return False
+        if update.version <= self.policy.version:
+            return False  # an older or repeated version (e.g. a query answer after an update)
+        try:
+            self.policy.load(update)
+        except ValueError:
+            self.bad_weights += 1  # another network's weights: counted and ignored, like a bad message
+            return False
+        if not self.first_weights_sha256 and (not self.rehearsal or update.phase == 2):
+            self.first_weights_sha256 = wire.tensors_digest(update.tensors)
         self.weight_updates += 1
         if self.uses_policy_vehicles:
             for env in self.envs:  # other vehicles driven by a copy of the agent's current model
@@ -190,12 +170,16 @@ class EnvWorker:
         pending = [NStepAccumulator(self.n_step, self.gamma) for _ in self.envs]
         items: list[NStepItem] = []
         rate_limited_s = 0.0
-        while steps < env_steps and not links.stop_requested():
+        stopping = False
+        while steps < env_steps and not stopping:
             if not self.sync:  # sync is paced by the learner's rounds already
                 waited = time.monotonic()
                 links.wait_insert_ok()
                 rate_limited_s += time.monotonic() - waited
             for _ in range(iters):
+                if links.stop_requested():
+                    stopping = True  # the batch being filled ends here: what it holds is sent below
+                    break
                 eps = epsilon(steps)
                 actions = self.policy.act(obs, eps)
                 # The budget's last step may need fewer than all envs: never overrun it.
@@ -217,35 +201,47 @@ class EnvWorker:
                 steps += min(n_envs, env_steps - steps)
                 if steps >= env_steps:
                     break
-            if steps >= env_steps or links.stop_requested():  # the budget's last items bootstrap from here
+            if steps >= env_steps or stopping:  # the budget's (or the stop's) last items bootstrap from here
                 for j, acc in enumerate(pending):
                     items += acc.flush(obs[j].copy())
             if not items:  # n-step: nothing complete yet (fewer than n steps so far)
                 continue
-            batch = wire.TransitionBatch.from_arrays(
-                actor=self.name, seq=seq, weights_version=self.policy.version, phase=self.policy.phase,
-                env_steps=steps, obs=np.stack([it.obs for it in items]), action=[it.action for it in items],
-                reward=[it.reward for it in items], next_obs=np.stack([it.next_obs for it in items]),
-                terminated=[it.terminated for it in items], truncated=[it.truncated for it in items],
-                steps=[it.steps for it in items])
+            links.send_transitions(self._batch(seq, steps, items))
             items = []
-            links.send_transitions(batch)
             versions.append(self.policy.version)
             seq += 1
+            if stopping:
+                break
             if self.sync and steps < env_steps:
                 # MATLAB sync: the host learns from every worker's batch, then sends new parameters to all.
-                if not self._await_weights(links, self.policy.version):
-                    break
+                # A stop ends the wait; the next pass sends the n-step items still pending, and ends.
+                self._await_weights(links, self.policy.version)
             else:
                 self._apply(links.latest_weights())
-        if not links.stop_requested():
-            links.flush()  # what the server lacks is sent again; what it never gets is counted lost
-        return self._summary(steps, episodes, seq, versions, started, rate_limited_s)
+        # What the server lacks is sent again (after a stop for a couple of seconds only); what it
+        # has not confirmed then is counted lost, and said.
+        delivery = links.flush()
+        if not delivery.complete:
+            print(f"{self.name}: {delivery.undelivered_batches} batches ({delivery.undelivered_items} items) sent "
+                  f"and not confirmed by the replay server when this worker ended: counted lost (the run's "
+                  f"summary counts what the server holds)", flush=True)
+        return self._summary(steps, episodes, seq, versions, started, rate_limited_s, delivery)
+
+    def _batch(self, seq: int, steps: int, items: list[NStepItem]) -> wire.TransitionBatch:
+        """Batch ``seq`` of ``items``, made with the current weights, ``steps`` env steps done."""
+        return wire.TransitionBatch.from_arrays(
+            actor=self.name, seq=seq, weights_version=self.policy.version, phase=self.policy.phase,
+            env_steps=steps, obs=np.stack([it.obs for it in items]), action=[it.action for it in items],
+            reward=[it.reward for it in items], next_obs=np.stack([it.next_obs for it in items]),
+            terminated=[it.terminated for it in items], truncated=[it.truncated for it in items],
+            steps=[it.steps for it in items])
 
     def _summary(self, steps: int, episodes: int, batches: int, versions: list[int], started: float,
-                 rate_limited_s: float = 0.0) -> WorkerSummary:
+                 rate_limited_s: float = 0.0, delivery: Delivery | None = None) -> WorkerSummary:
+        delivery = delivery or Delivery()
         return WorkerSummary(self.name, steps, episodes, batches, versions, self.weight_updates, self.bad_weights,
-                             self.first_weights_sha256, round(time.monotonic() - started, 3), round(rate_limited_s, 3))
+                             self.first_weights_sha256, round(time.monotonic() - started, 3), round(rate_limited_s, 3),
+                             delivery.undelivered_batches, delivery.undelivered_items)
 
     def close(self) -> None:
         for env in self.envs:

@@ -22,7 +22,19 @@ from typing import TYPE_CHECKING, Any
 from laneshift.config import RunConfig, worker_budgets, worker_names
 
 if TYPE_CHECKING:  # the router's process builds through here without the spec (wire, numpy)
+    import zenoh
+
+    from laneshift.actors.links import ZenohActorLinks
+    from laneshift.actors.worker import EnvWorker
     from laneshift.envspec import EnvSpec
+    from laneshift.learner.links import ZenohLearnerLinks
+    from laneshift.learner.loop import Learner
+    from laneshift.learner.periodic_eval import EvaluatePolicy
+    from laneshift.learner.seams import LearnerLinks
+    from laneshift.replay_server.core import ReplayCore
+    from laneshift.replay_server.service import ReplayServer
+
+    from .router import Router
 
 
 def replay_server_names(shards: int) -> list[str]:
@@ -83,12 +95,12 @@ class Builder:
 
     # ------------------------------------------------------------------ what each component is
 
-    def router(self, listen: str):
+    def router(self, listen: str) -> Router:
         from .router import Router
 
         return Router(listen, self.cfg.max_message_bytes)
 
-    def replay_core(self, shard: int = 0):
+    def replay_core(self, shard: int = 0) -> ReplayCore:
         """The replay tables and rules alone (the in-process mode drives it directly)."""
         from laneshift.replay_server.service import build_core
 
@@ -100,18 +112,18 @@ class Builder:
         the other shards of a sharded replay (``replay.shards``)."""
         return replay_server_names(self.cfg.replay.shards)
 
-    def replay_server(self, shard: int = 0):
+    def replay_server(self, shard: int = 0) -> ReplayServer:
         """Core + zenoh service + HTTP API, as one server with start()/stop() (shard ``shard``)."""
         from laneshift.replay_server.service import ReplayServer
 
         return ReplayServer(self.cfg, self.spec, shard=shard)
 
-    def learner(self, links, stop: threading.Event):
+    def learner(self, links: LearnerLinks, stop: threading.Event) -> Learner:
         from laneshift.learner.loop import Learner
 
         return Learner(self.cfg, self.spec, links, stop, self.greedy_evaluation())
 
-    def greedy_evaluation(self):
+    def greedy_evaluation(self) -> EvaluatePolicy | None:
         """The learner's ``EvaluatePolicy`` for ``train.eval_every`` (None when off): the run's env,
         ``train.periodic_eval_episodes`` episodes on validation episode seeds (``train.validation_seed``
         on: the same episodes every time, in every seed's run, apart from the studies' test seeds)."""
@@ -123,12 +135,12 @@ class Builder:
         env_cfg, episodes, seed = self.cfg.env, t.periodic_eval_episodes, t.validation_seed
         return lambda batch: evaluate_policy(lambda env: GreedyPolicy(batch), env_cfg, episodes, seed=seed)
 
-    def learner_links(self, session, stop: threading.Event):
+    def learner_links(self, session: zenoh.Session, stop: threading.Event) -> ZenohLearnerLinks:
         from laneshift.learner.links import ZenohLearnerLinks
 
         return ZenohLearnerLinks(session, self.cfg, self.spec.schema, stop)
 
-    def env_worker(self, index: int):
+    def env_worker(self, index: int) -> EnvWorker:
         from laneshift.actors.worker import EnvWorker
 
         cfg = self.cfg
@@ -137,7 +149,7 @@ class Builder:
                          n_step=cfg.learner.n_step, gamma=cfg.learner.gamma, dueling=cfg.learner.dueling,
                          cnn=cfg.learner.cnn)
 
-    def actor_links(self, session, name: str):
+    def actor_links(self, session: zenoh.Session, name: str) -> ZenohActorLinks:
         from laneshift.actors.links import ZenohActorLinks
 
         return ZenohActorLinks(session, self.cfg.transport.run_id, name, self.cfg.transport.timeout_s,

@@ -4,9 +4,12 @@ What it is: the in-process runner. The components come from the same ``deploy.bu
 as in local and cluster mode; only where they run differs: workers and the learner are threads
 talking through in-memory links to a ReplayCore (one per shard with ``replay.shards`` > 1, each
 worker sending to its shard and the learner sampling all through ``learner.shards.ShardedReplay``,
-as over zenoh). Every message still goes through the wire encoder and decoder, so the contract is
-exercised as in a real run.
-Room: deploy, the wiring. May import: the contract, ``deploy.builder`` and the learner's replay seams (``learner.seams``, ``learner.shards``).
+as over zenoh). The links are the seams' in-memory adapters (``actors.seams``, ``learner.seams``):
+typed values at the seams, and every message still goes through the wire encoder and decoder
+in between, so the contract is exercised as in a real run.
+Room: deploy, the wiring. May import: the contract, ``deploy.builder``, the workers' seams
+(``actors.seams``) and the learner's (``learner.seams``, ``learner.shards``, ``learner.episodes``,
+``learner.status``).
 
     >>> from laneshift.config import load_run_config
     >>> cfg = load_run_config(overrides={"env.scenario": "lka", "train.env_steps": 2000})  # doctest: +SKIP
@@ -18,14 +21,17 @@ from __future__ import annotations
 import collections
 import threading
 from dataclasses import dataclass, field
-
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from laneshift import wire
+from laneshift.actors.seams import Delivery, WeightsUpdate
 from laneshift.config import RunConfig
-
-from laneshift.learner.seams import PendingSample, ReplayThrough
+from laneshift.learner.episodes import read_record
+from laneshift.learner.seams import EpisodeUpdate, PendingSample, ReplayThrough
 from laneshift.learner.shards import replay_over
+
+if TYPE_CHECKING:
+    from laneshift.learner.status import LearnerStatus
 
 from .builder import Builder
 
@@ -37,12 +43,14 @@ class Board:
     cores: list  # laneshift.replay_server.core.ReplayCore, one per replay shard
     stop: threading.Event = field(default_factory=threading.Event)
     cond: threading.Condition = field(default_factory=threading.Condition)
-    weights: bytes = b""
+    weights: bytes = b""  # the newest WEIGHTS message, as the learner's links encoded it
     episodes: collections.deque = field(default_factory=lambda: collections.deque(maxlen=10_000))
     learner_stats: dict = field(default_factory=dict)
 
 
 class InProcessActorLinks:
+    """A worker's ``ActorLinks`` on the board: batches into its shard's core, weights decoded."""
+
     def __init__(self, board: Board, name: str):
         self.board, self.name = board, name
         self.core = board.cores[wire.shard_of(name, len(board.cores))]  # this worker's replay shard
@@ -54,17 +62,20 @@ class InProcessActorLinks:
     def send_episode(self, record: wire.EpisodeRecord) -> None:
         self.board.episodes.append(wire.encode_episode(record))
 
-    def flush(self) -> bool:
-        return True  # send_transitions stored it before returning
+    def flush(self) -> Delivery:
+        return Delivery()  # send_transitions stored it before returning
 
-    def latest_weights(self) -> bytes | None:
+    def latest_weights(self) -> WeightsUpdate:
         with self.board.cond:
-            if self.board.weights and self.board.weights is not self._seen:
-                self._seen = self.board.weights
-                return self._seen
-        return None
+            if not self.board.weights or self.board.weights is self._seen:
+                return None
+            self._seen = self.board.weights
+        try:
+            return wire.decode_weights(self._seen)  # each worker decodes, as over zenoh
+        except wire.WireError as exc:
+            return exc
 
-    def wait_weights(self, timeout: float) -> bytes | None:
+    def wait_weights(self, timeout: float) -> WeightsUpdate:
         with self.board.cond:
             if self.board.weights is self._seen:
                 self.board.cond.wait(timeout)
@@ -107,23 +118,26 @@ class InProcessReplay:
 
 
 class InProcessLearnerLinks(ReplayThrough):
+    """The learner's ``LearnerLinks`` on the board: weights and stats encoded, episodes decoded."""
+
     def __init__(self, board: Board, schema: wire.TransitionSchema, beta: float = 0.4, seed: int = 0):
         self.board, self.schema = board, schema
         shards = [InProcessReplay(core, schema) for core in board.cores]
         self.replay = replay_over(shards, beta=beta, seed=seed)
 
-    def publish_weights(self, payload: bytes) -> None:
+    def publish_weights(self, weights: wire.Weights) -> None:
+        payload = wire.encode_weights(weights)  # encoded now: the tensors are views of the network
         with self.board.cond:
             self.board.weights = payload
             self.board.cond.notify_all()
 
-    def publish_stats(self, payload: bytes) -> None:
-        self.board.learner_stats = wire.decode_json(payload)
+    def publish_stats(self, status: LearnerStatus, final: bool = False) -> None:
+        self.board.learner_stats = wire.decode_json(wire.encode_json(status.stats_message(final)))
 
-    def take_episodes(self) -> list[bytes]:
+    def take_episodes(self) -> list[EpisodeUpdate]:
         out = []
         while self.board.episodes:
-            out.append(self.board.episodes.popleft())
+            out.append(read_record(self.board.episodes.popleft()))
         return out
 
     def stop_requested(self) -> bool:

@@ -1,6 +1,7 @@
 """The env workers' episode records as the learner keeps them: running statistics over the last
 100 episodes (return, length, crash and achievement rates, epsilon), each worker's env steps, and
-the records that could not be read (counted and said once, never a silent loss).
+the records that could not be read (counted and said once, never a silent loss). ``read_record``
+decodes one as the links take it (``seams.EpisodeUpdate``: the record or the error).
 
 Room: learner (component). May import: numpy, the contract (``laneshift.wire``); never another
 component.
@@ -32,16 +33,15 @@ class EpisodeStats:
         self.worker_steps: dict[str, int] = {}
         self.worker_epsilon: dict[str, float] = {}  # each worker's epsilon at its newest episode
 
-    def decode(self, payload: bytes) -> wire.EpisodeRecord | None:
-        """One record as sent, or None (counted) if it cannot be read."""
-        try:
-            return wire.decode_episode(payload)
-        except wire.WireError as exc:
+    def accept(self, update: wire.EpisodeRecord | wire.WireError) -> wire.EpisodeRecord | None:
+        """One record as the links took it, or None (counted) if it could not be read."""
+        if isinstance(update, wire.WireError):
             self.bad_records += 1
             if self.bad_records == 1:
-                print(f"learner: skipped an unreadable episode record ({exc}); "
+                print(f"learner: skipped an unreadable episode record ({update}); "
                       f"the count is bad_episode_records in the status", flush=True)
             return None
+        return update
 
     def add(self, ep: wire.EpisodeRecord) -> None:
         crashed = float(ep.crashed)
@@ -74,3 +74,12 @@ class EpisodeStats:
     def epsilon(self) -> float | None:
         """The workers' mean epsilon at their newest episodes."""
         return float(np.mean(list(self.worker_epsilon.values()))) if self.worker_epsilon else None
+
+
+def read_record(payload: bytes) -> wire.EpisodeRecord | wire.WireError:
+    """An episode record as sent, decoded; the WireError of one that cannot be read (the learner
+    counts it: ``EpisodeStats.accept``)."""
+    try:
+        return wire.decode_episode(payload)
+    except wire.WireError as exc:
+        return exc

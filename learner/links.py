@@ -3,26 +3,33 @@
 
 - ``ZenohReplayShard``: one replay server's ``ReplayShardClient`` (queries on its namespace's keys);
 - ``ZenohLearnerLinks``: the learner's ``LearnerLinks``: the replay through one ``ZenohReplayShard``
-  (or ``shards.ShardedReplay`` over one per shard), weights published with BLOCK and served to late
-  joiners, the workers' episode records, the learner's stats and the run's stop.
+  (or ``shards.ShardedReplay`` over one per shard), weights encoded and published with BLOCK and
+  served to late joiners, the workers' episode records decoded, the learner's status published
+  as its stats message, and the run's stop.
 
-Room: learner (component). May import: the contract and laneshift.learner (``seams``, ``shards``);
-never another component.
+Every message the learner sends or takes is encoded or decoded here; the loop sees typed values.
+
+Room: learner (component). May import: the contract and laneshift.learner (``seams``, ``shards``,
+``episodes``, ``status``); never another component.
 """
 
 from __future__ import annotations
 
 import collections
 import threading
-from typing import TypeVar
+from typing import TYPE_CHECKING, TypeVar
 
 import zenoh
 
 from laneshift import transport, wire
 from laneshift.config import RunConfig
 
-from .seams import PendingSample, ReplayClient, ReplayThrough
+from .episodes import read_record
+from .seams import EpisodeUpdate, PendingSample, ReplayClient, ReplayThrough
 from .shards import replay_over
+
+if TYPE_CHECKING:
+    from .status import LearnerStatus
 
 T = TypeVar("T")
 
@@ -102,17 +109,18 @@ class ZenohLearnerLinks(ReplayThrough):
                                    cfg.transport.router) for i in range(n)]
         self.replay: ReplayClient = replay_over(shards, beta=cfg.replay.priority_beta, seed=cfg.learner.seed)
 
-    def publish_weights(self, payload: bytes) -> None:
+    def publish_weights(self, weights: wire.Weights) -> None:
+        payload = wire.encode_weights(weights)  # the one place the learner's weights are encoded
         self._latest = payload
         self._pub.put(payload)
 
-    def publish_stats(self, payload: bytes) -> None:
-        self._stats_pub.put(payload)
+    def publish_stats(self, status: LearnerStatus, final: bool = False) -> None:
+        self._stats_pub.put(wire.encode_json(status.stats_message(final)))
 
-    def take_episodes(self) -> list[bytes]:
+    def take_episodes(self) -> list[EpisodeUpdate]:
         out = []
         while self._episodes:
-            out.append(self._episodes.popleft())
+            out.append(read_record(self._episodes.popleft()))
         return out
 
     def stop_requested(self) -> bool:

@@ -41,7 +41,7 @@ import torch
 from laneshift import wire
 from laneshift.config import RunConfig, worker_names
 from laneshift.envspec import LAYOUT_OPTIONS, EnvSpec
-from laneshift.qnet import to_wire
+from laneshift.qnet import weights_of
 
 from .batches import retry_delay, sample_or_wait, split_updates
 from .dqn import METRIC_NAMES, DoubleDQN
@@ -169,7 +169,7 @@ class Learner:
     def publish(self) -> None:
         # Before the broadcast: a restarted learner must never reuse a version actors saw.
         self.files.write_published(self.version, self.agent.updates)
-        self.links.publish_weights(to_wire(self.agent.policy_net, self.version, self.phase, self.agent.updates))
+        self.links.publish_weights(weights_of(self.agent.policy_net, self.version, self.phase, self.agent.updates))
 
     def checkpoint(self, name: str = "latest") -> Path | None:
         meta = {"version": self.version, "updates": self.agent.updates, "phase": self.phase,
@@ -213,7 +213,7 @@ class Learner:
         self.checkpoint("latest")
         self.checkpoint("final")
         self.save_state()
-        self.links.publish_stats(wire.encode_json({**self._status().to_dict(), "done": True}))
+        self.links.publish_stats(self._status(), final=True)
         self.metrics.hparams(self.cfg.to_dict(), self._final_metrics(), self.env_steps)
         self.metrics.close()
         if self.prometheus is not None:
@@ -331,8 +331,8 @@ class Learner:
     # ------------------------------------------------------------------ episodes and the stop criterion
 
     def _drain_episodes(self) -> None:
-        for payload in self.links.take_episodes():
-            ep = self.episodes.decode(payload)
+        for update in self.links.take_episodes():
+            ep = self.episodes.accept(update)
             if ep is None:
                 continue
             steps_before = self.episodes.env_steps
@@ -399,7 +399,7 @@ class Learner:
         self.last_status = status
         if self.prometheus is not None:
             self.prometheus.update(status, env_steps=self._note_env_steps())
-        self.links.publish_stats(wire.encode_json(status.to_dict()))
+        self.links.publish_stats(status)
         scalars = tensorboard_scalars(status, self.replay_stats)
         step = self._note_env_steps()
         if self.phase == 1:  # demo-only updates, no env steps yet: the update count is the step

@@ -1,6 +1,7 @@
 """The learner's seams (Acme style): what the same Learner needs from the world, over zenoh or
 in-process alike. Types only (and one forwarding helper); the zenoh adapters are in ``links``,
-the sharded replay in ``shards``, and both import this module.
+the sharded replay in ``shards``, and both import this module. Every value crossing a seam is
+typed; the adapters own the encoding (the wire's bytes never reach the learner's loop).
 
 - ``ReplayClient``: ``sample(SampleRequest)`` -> SampledBatch, a WireError (not ready / rate
   limited) or None; ``send_priorities(PriorityUpdate)`` (the |TD errors| of a sampled batch's rows,
@@ -8,23 +9,34 @@ the sharded replay in ``shards``, and both import this module.
   (one replay server: ``links.ZenohReplayShard``; several: ``shards.ShardedReplay`` over one
   each, a ``ReplayShardClient``, which can also send a request before waiting for it:
   ``request_sample``, returning a ``PendingSample``);
-- ``WeightsPublisher``: ``publish_weights(bytes)`` (safetensors with a version, ``laneshift.qnet``);
-- ``RunChannel``: ``take_episodes()`` (the workers' episode records, as sent: the learner
-  validates and counts them), ``publish_stats(bytes)``, ``stop_requested()``, ``stop_all()``;
+- ``WeightsPublisher``: ``publish_weights(wire.Weights)`` (the network's tensors with their
+  version, rehearsal phase and update count: ``laneshift.qnet.weights_of``; the tensors may be
+  views of the learner's network, so an adapter encodes them before it returns);
+- ``RunChannel``: ``take_episodes()`` (the workers' episode records, each an ``EpisodeUpdate``:
+  decoded by the adapter, or the ``wire.WireError`` of one that could not be read, which the
+  learner counts), ``publish_stats(LearnerStatus, final)`` (``status.LearnerStatus``; the adapter
+  sends ``to_dict()`` as JSON, with ``"done": true`` on the final one), ``stop_requested()``,
+  ``stop_all()``;
 - ``LearnerLinks``: all three as one object; ``ReplayThrough``: the ``ReplayClient`` half of a
   LearnerLinks, forwarded to its ``replay``.
 
-Room: learner (component). May import: the contract; never another component.
+Room: learner (component). May import: the contract and, for its type, ``status``; never another
+component.
 """
 
 from __future__ import annotations
 
-from typing import Callable, Protocol
+from typing import TYPE_CHECKING, Callable, Protocol, TypeAlias
 
 from laneshift import wire
 
+if TYPE_CHECKING:  # the status module brings the learner's torch code; the seams stay types only
+    from .status import LearnerStatus
+
 # A sample request already sent: calling it waits for the reply (``ReplayShardClient.request_sample``).
 PendingSample = Callable[[], "wire.SampledBatch | wire.WireError | None"]
+#: One of the workers' episode records: decoded, or the error of one that could not be read.
+EpisodeUpdate: TypeAlias = wire.EpisodeRecord | wire.WireError
 
 
 class ReplayClient(Protocol):
@@ -49,14 +61,14 @@ class ReplayShardClient(ReplayClient, Protocol):
 class WeightsPublisher(Protocol):
     """The weights broadcast to the env workers."""
 
-    def publish_weights(self, payload: bytes) -> None: ...
+    def publish_weights(self, weights: wire.Weights) -> None: ...
 
 
 class RunChannel(Protocol):
     """Episode records in, the learner's stats out, and the run's stop."""
 
-    def take_episodes(self) -> list[bytes]: ...
-    def publish_stats(self, payload: bytes) -> None: ...
+    def take_episodes(self) -> list[EpisodeUpdate]: ...
+    def publish_stats(self, status: LearnerStatus, final: bool = False) -> None: ...
     def stop_requested(self) -> bool: ...
     def stop_all(self) -> None: ...
 

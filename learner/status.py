@@ -1,9 +1,10 @@
 """The learner's status, computed once per log interval (``learner.log_every_s``): one typed value,
 ``LearnerStatus``, and what is made of it.
 
-- ``LearnerStatus.to_dict()`` is the stats message the learner publishes (``wire.encode_json``;
-  the launcher's progress line and the run's summary read it, by these field names, in this
-  order) and what ``deploy.actors.LearnerActor.status`` returns;
+- ``LearnerStatus.to_dict()`` is the stats message the learner publishes (``stats_message``, which
+  the links encode with ``wire.encode_json``; the launcher's progress line and the run's summary
+  read it, by these field names, in this order) and what ``deploy.actors.LearnerActor.status``
+  returns;
 - ``record(status, replay_stats)``: the numbers of one ``learner`` line of ``metrics.jsonl``;
 - ``tensorboard_scalars(status, replay_stats)``: TensorBoard's tags for the interval
   (``learner/*``, ``train/*``, ``actors/*``, ``replay/*``);
@@ -74,6 +75,10 @@ class LearnerStatus:
     def to_dict(self) -> dict[str, Any]:
         """The stats message's fields, in the order above."""
         return dataclasses.asdict(self)
+
+    def stats_message(self, final: bool = False) -> dict[str, Any]:
+        """The stats message's body: ``to_dict()``, and ``"done": true`` on the run's final one."""
+        return {**self.to_dict(), "done": True} if final else self.to_dict()
 
 
 class IntervalRates:

@@ -163,10 +163,10 @@ class _NoLinks:
     def __init__(self):
         self.versions: list[int] = []
 
-    def publish_weights(self, payload: bytes) -> None:
-        self.versions.append(wire.decode_weights(payload).version)
+    def publish_weights(self, weights: wire.Weights) -> None:
+        self.versions.append(weights.version)
 
-    def publish_stats(self, payload: bytes) -> None: ...
+    def publish_stats(self, status, final: bool = False) -> None: ...
     def replay_stats(self): return None
     def set_phase(self, phase): return True
     def take_episodes(self): return []

@@ -7,10 +7,14 @@ the code under test needs."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
+from laneshift import wire
 from laneshift.actors.worker import expand_version_runs
 from laneshift.config import load_run_config
-from laneshift.deploy.inprocess import train_inprocess
+from laneshift.deploy.builder import Builder
+from laneshift.deploy.inprocess import Board, InProcessActorLinks, train_inprocess
+from laneshift.qnet import build_q_network, to_wire
 
 FAST = {"env.scenario": "lka", "actor.send_every": 50, "learner.hidden": "32,32", "learner.batch_size": 32,
         "learner.publish_every": 5, "replay.min_size": 100, "replay.samples_per_insert": 4,
@@ -62,6 +66,95 @@ def test_stop_return_ends_the_run_at_the_first_episode_that_reaches_it(tmp_path)
     reason = result["learner"]["stop_reason"]
     assert reason["criterion"] == "stop_return" and reason["episode"] == 1
     assert sum(w["env_steps"] for w in result["workers"]) < 100_000  # stopped long before the budget
+
+
+def test_the_worker_gets_decoded_weights_and_counts_those_it_cannot_use(tmp_path):
+    """The links decode each WEIGHTS message: the worker gets ``wire.Weights``, or the WireError
+    of a message that cannot be read; that one and another network's weights are counted in
+    ``bad_weights`` and the worker keeps acting with the weights it has."""
+    cfg = load_run_config(overrides={**FAST, "actor.workers": 1, "train.run_dir": str(tmp_path)})
+    builder = Builder(cfg)
+    board = Board(cores=[builder.replay_core(0)])
+    links, worker = InProcessActorLinks(board, "w0"), builder.env_worker(0)
+    schema = builder.spec.schema
+    try:
+        board.weights = b"not a weights message"
+        update = links.latest_weights()
+        assert isinstance(update, wire.WireError) and not worker._apply(update)
+        board.weights = to_wire(build_q_network(schema.obs_shape, schema.n_actions, (8,)), 1, 0, 0)
+        assert not worker._apply(links.latest_weights())  # another network's shapes
+        assert links.latest_weights() is None  # nothing new
+        board.weights = to_wire(build_q_network(schema.obs_shape, schema.n_actions, cfg.learner.hidden), 2, 0, 5)
+        update = links.latest_weights()
+        assert isinstance(update, wire.Weights) and (update.version, update.updates) == (2, 5)
+        assert worker._apply(update) and worker.policy.version == 2
+        assert (worker.bad_weights, worker.weight_updates) == (2, 1)
+    finally:
+        worker.close()
+
+
+class StoppedLinks(InProcessActorLinks):
+    """A worker's in-memory links whose run is stopped (the launcher's graceful end: the stop
+    message) the moment the worker sends batch ``at_seq``, or ends its first episode."""
+
+    def __init__(self, board: Board, name: str, at_seq: int | None = None, at_episode: bool = False):
+        super().__init__(board, name)
+        self.at_seq, self.at_episode = at_seq, at_episode
+        self.sent: list[wire.TransitionBatch] = []
+        self.first_episode: wire.EpisodeRecord | None = None
+
+    def send_transitions(self, batch: wire.TransitionBatch) -> None:
+        super().send_transitions(batch)
+        self.sent.append(batch)
+        if batch.seq == self.at_seq:
+            self.board.stop.set()
+
+    def send_episode(self, record: wire.EpisodeRecord) -> None:
+        super().send_episode(record)
+        if self.at_episode and self.first_episode is None:
+            self.first_episode = record
+            self.board.stop.set()
+
+
+def _stopped_worker(tmp_path, links_args: dict, **overrides) -> tuple[dict, StoppedLinks, dict]:
+    """One real worker (LKA) against a real replay core, stopped as ``links_args`` says; its
+    summary, its links and the core's record of it."""
+    cfg = load_run_config(overrides={**FAST, "actor.workers": 1, "train.run_dir": str(tmp_path), **overrides})
+    builder = Builder(cfg)
+    board = Board(cores=[builder.replay_core(0)])
+    schema = builder.spec.schema
+    net = build_q_network(schema.obs_shape, schema.n_actions, cfg.learner.hidden)
+    board.weights = to_wire(net, 0, 0, 0)  # version 0; no learner publishes another
+    links = StoppedLinks(board, "w0", **links_args)
+    worker = builder.env_worker(0)
+    try:
+        summary = worker.run(links, 10_000).as_dict()
+    finally:
+        worker.close()
+    return summary, links, board.cores[0].stats(all_actors=True)["actors"]["w0"]
+
+
+@pytest.mark.parametrize("parallel", ["async", "sync"])
+def test_a_stopped_worker_sends_the_n_step_items_it_still_held(tmp_path, parallel):
+    """Stopped right after its first batch (a sync worker while it waits for the next weights):
+    the items of the last n - 1 steps of each env, whose n rewards are not all known yet, go
+    out in one last batch, so every env step made is stored (they used to be dropped)."""
+    summary, links, stored = _stopped_worker(tmp_path, {"at_seq": 0}, **{"train.parallel": parallel,
+                                                                         "learner.n_step": 3})
+    assert [len(b) for b in links.sent] == [50 - 2, 2]  # the first window completes at step 3
+    assert summary["env_steps"] == 50 and summary["batches"] == 2
+    assert (stored["stored"], stored["env_steps"], stored["lost_items"]) == (50, 50, 0)
+    assert (summary["undelivered_batches"], summary["undelivered_items"]) == (0, 0)
+
+
+def test_a_stop_ends_the_batch_being_filled_and_sends_it(tmp_path):
+    """The stop comes in the middle of a batch (at the first episode's end, before send_every
+    steps): the worker steps no further and sends the shorter batch it holds."""
+    summary, links, stored = _stopped_worker(tmp_path, {"at_episode": True}, **{"env.max_steps": 20})
+    steps = links.first_episode.env_steps
+    assert steps <= 20 < 50
+    assert summary["env_steps"] == steps and [len(b) for b in links.sent] == [steps]
+    assert (stored["stored"], stored["env_steps"], stored["lost_items"]) == (steps, steps, 0)
 
 
 def test_pixel_run_learns_from_frames_held_once_each(tmp_path):

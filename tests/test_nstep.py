@@ -110,8 +110,8 @@ def test_learner_discounts_the_bootstrap_by_gamma_to_the_steps():
 class _RecordingLinks:
     """The worker's seams, in memory: one weights version, every transitions batch kept."""
 
-    def __init__(self, weights: bytes):
-        self.weights: bytes | None = weights
+    def __init__(self, weights):
+        self.weights = weights  # one wire.Weights, taken by the first wait
         self.batches: list = []
 
     def send_transitions(self, batch) -> None:
@@ -123,13 +123,15 @@ class _RecordingLinks:
     def send_episode(self, record) -> None:
         pass
 
-    def flush(self) -> bool:
-        return True
+    def flush(self):
+        from laneshift.actors.seams import Delivery
 
-    def latest_weights(self) -> bytes | None:
+        return Delivery()
+
+    def latest_weights(self):
         return None
 
-    def wait_weights(self, timeout: float) -> bytes | None:
+    def wait_weights(self, timeout: float):
         w, self.weights = self.weights, None
         return w
 
@@ -145,12 +147,12 @@ def _worker_items(n_step: int, env_steps: int) -> tuple[dict, list[int]]:
     from laneshift.config import ActorConfig, EnvConfig
     from laneshift.actors.envs import spec_of
     from laneshift.qnet import build_q_network
-    from laneshift.qnet import to_wire
+    from laneshift.qnet import weights_of
 
     env_cfg = EnvConfig(scenario="straight", max_steps=40)  # several episode ends in the run
     spec = spec_of(env_cfg)
     torch.manual_seed(0)
-    links = _RecordingLinks(to_wire(build_q_network(spec.schema.obs_shape, spec.schema.n_actions, (16,)), 0, 0, 0))
+    links = _RecordingLinks(weights_of(build_q_network(spec.schema.obs_shape, spec.schema.n_actions, (16,)), 0, 0, 0))
     links.schema = spec.schema
     worker = EnvWorker("w0", 0, env_cfg, ActorConfig(send_every=16, epsilon_final=0.5), (16,), sync=False,
                        rehearsal=False, n_step=n_step, gamma=0.9)

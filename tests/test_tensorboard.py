@@ -22,6 +22,7 @@ from laneshift import wire
 from laneshift.config import EnvConfig, load_run_config
 from laneshift.envspec import EnvSpec
 from laneshift.learner.dqn import METRIC_NAMES
+from laneshift.learner.episodes import read_record
 from laneshift.learner.loop import Learner
 from laneshift.learner.periodic_eval import GreedyEval
 from laneshift.learner.status import LearnerStatus
@@ -65,18 +66,18 @@ class FakeLinks:
     def set_phase(self, phase: int) -> bool:
         return True
 
-    def publish_weights(self, payload: bytes) -> None:
+    def publish_weights(self, weights: wire.Weights) -> None:
         pass
 
     def send_priorities(self, update: wire.PriorityUpdate) -> None:
         pass
 
-    def publish_stats(self, payload: bytes) -> None:
-        self.status = wire.decode_json(payload)
+    def publish_stats(self, status: LearnerStatus, final: bool = False) -> None:
+        self.status = status.stats_message(final)
 
-    def take_episodes(self) -> list[bytes]:
+    def take_episodes(self) -> list[wire.EpisodeRecord | wire.WireError]:
         out, self.episodes = self.episodes, []
-        return out
+        return [read_record(payload) for payload in out]  # decoded, as the links hand them over
 
     def stop_requested(self) -> bool:
         return False

@@ -5,7 +5,7 @@ What it is: transport.WaitLines and wait_with_lines on a fake clock; an env work
 for weights through a real router in this process; and a real `laneshift learner` started with no
 router, which must say it waits for the router, then, once one is started, that it connected and
 that it waits for the replay server.
-Room: tests, unit. May import: the standard library, pytest, zenoh and laneshift.
+Room: tests, unit. May import: the standard library, pytest, numpy, zenoh and laneshift.
 Every process this file starts is ended by its own PID (SIGTERM, then SIGKILL after a bound).
 """
 
@@ -20,6 +20,7 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 import zenoh
 
@@ -204,12 +205,15 @@ def test_a_worker_says_it_waits_for_weights_then_that_they_came(monkeypatch, cap
         assert first == [f"w3: waiting for the learner's weights on {wire.weights_key('t')} "
                          f"(router {cfg.router}) ..."], first
         stop = threading.Event()
-        transport.serve_queries(session, wire.weights_latest_key("t"), lambda _: b"weights", stop)
+        weights = wire.encode_weights(wire.Weights(version=4, phase=0, updates=9,
+                                                   tensors={"w": np.arange(3, dtype=np.float32)}))
+        transport.serve_queries(session, wire.weights_latest_key("t"), lambda _: weights, stop)
         try:
             got = None
             while time.monotonic() < deadline and got is None:
                 got = links.wait_weights(0.1)
-            assert got == b"weights"
+            assert isinstance(got, wire.Weights) and (got.version, got.updates) == (4, 9)  # decoded by the links
+            assert got.tensors["w"].tolist() == [0.0, 1.0, 2.0]
         finally:
             stop.set()
         last = capsys.readouterr().err.splitlines()

@@ -18,8 +18,9 @@ the scripted demos it chose the demonstrator's action more often and survived mo
 (docs/results-history.md, round 2).
 
 Weights travel and rest as safetensors (``wire.encode_weights`` with a version; checkpoints are
-plain safetensors files that ``safetensors.torch.load_file`` reads): ``to_wire``, ``load_into``
-(strict names and shapes), ``save_checkpoint`` (atomic), ``load_checkpoint``.
+plain safetensors files that ``safetensors.torch.load_file`` reads): ``weights_of`` (the typed
+value), ``to_wire`` (its message), ``load_into`` (strict names and shapes), ``save_checkpoint``
+(atomic), ``load_checkpoint``.
 
 Room: the contract (shared by every process). May import: other contract modules only, never a
 component, deploy or a tool.
@@ -141,9 +142,16 @@ def build_q_network(obs_shape: tuple[int, ...], n_actions: int, hidden: tuple[in
 
 # ------------------------------------------------------------------ weights
 
-def to_wire(net: nn.Module, version: int, phase: int, updates: int) -> bytes:
+def weights_of(net: nn.Module, version: int, phase: int, updates: int) -> wire.Weights:
+    """``net``'s weights as the typed value the learner publishes. On the CPU the arrays share
+    memory with the network: encode (or copy) them before its next update."""
     tensors = {k: v.detach().cpu().numpy() for k, v in net.state_dict().items()}
-    return wire.encode_weights(wire.Weights(version=version, phase=phase, updates=updates, tensors=tensors))
+    return wire.Weights(version=version, phase=phase, updates=updates, tensors=tensors)
+
+
+def to_wire(net: nn.Module, version: int, phase: int, updates: int) -> bytes:
+    """``weights_of`` as a WEIGHTS message."""
+    return wire.encode_weights(weights_of(net, version, phase, updates))
 
 
 def load_into(net: nn.Module, tensors: dict[str, np.ndarray]) -> None:

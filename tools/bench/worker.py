@@ -5,7 +5,7 @@ epsilon-greedily with a learner-shaped network and encoding every batch it sends
 core; its links only count what it sends (nothing downstream is measured: the replay server and
 the learner have their own benchmarks). Several envs per worker share one batched forward pass
 per step, which is what the 4 and 16 rows show.
-Room: the tools (benchmarks). May import: the contract, ``deploy`` and the argparse types (``laneshift.tools.argtypes``).
+Room: the tools (benchmarks). May import: the contract, ``deploy``, the worker's seams (``actors.seams``) and the argparse types (``laneshift.tools.argtypes``).
 
     laneshift bench worker --envs 1,4,16 --steps 4000 --json
 """
@@ -19,14 +19,15 @@ import sys
 import time
 
 from laneshift import wire
+from laneshift.actors.seams import Delivery
 from laneshift.tools.argtypes import positive_int
 
 
 class CountingLinks:
     """The worker's seams, answering at once: weights once, insert always allowed; counts bytes."""
 
-    def __init__(self, weights: bytes):
-        self._weights: bytes | None = weights
+    def __init__(self, weights: wire.Weights):
+        self._weights: wire.Weights | None = weights
         self.batches = self.bytes = self.episodes = 0
 
     def send_transitions(self, batch: wire.TransitionBatch) -> None:
@@ -36,14 +37,14 @@ class CountingLinks:
     def send_episode(self, record: wire.EpisodeRecord) -> None:
         self.episodes += 1
 
-    def flush(self) -> bool:
-        return True
+    def flush(self) -> Delivery:
+        return Delivery()
 
-    def latest_weights(self) -> bytes | None:
+    def latest_weights(self) -> wire.Weights | None:
         w, self._weights = self._weights, None
         return w
 
-    def wait_weights(self, timeout: float) -> bytes | None:
+    def wait_weights(self, timeout: float) -> wire.Weights | None:
         return self.latest_weights()
 
     def wait_insert_ok(self) -> None:
@@ -56,7 +57,7 @@ class CountingLinks:
 def bench_worker(scenario: str, envs: int, steps: int, epsilon: float = 0.1) -> dict:
     from laneshift.config import load_run_config
     from laneshift.qnet import build_q_network  # the learner's network, for its weights
-    from laneshift.qnet import to_wire
+    from laneshift.qnet import weights_of
 
     from laneshift.deploy.builder import Builder
 
@@ -67,7 +68,7 @@ def bench_worker(scenario: str, envs: int, steps: int, epsilon: float = 0.1) -> 
     spec = builder.spec.schema
     net = build_q_network(spec.obs_shape, spec.n_actions, cfg.learner.hidden, cfg.learner.dueling,
                           cfg.learner.cnn)
-    links = CountingLinks(to_wire(net, 0, 0, 0))
+    links = CountingLinks(weights_of(net, 0, 0, 0))
     started, cpu = time.perf_counter(), time.process_time()
     summary = worker.run(links, steps)
     wall, cpu = time.perf_counter() - started, time.process_time() - cpu
