@@ -23,8 +23,9 @@ from pathlib import Path
 import pytest
 
 from laneshift.config import load_run_config
-from laneshift.tools.chaos import FAST, FAULTS, FaultInjector, checkpointing
-from laneshift.tools.chaos import alive as _alive
+from laneshift.tools.chaos.faults import FAST, FAULTS
+from laneshift.tools.chaos.runs import alive as _alive
+from laneshift.tools.chaos.strikes import FaultInjector, checkpointing
 from laneshift.deploy.processes import descendants as _descendants
 from laneshift.deploy.local import train_local
 
@@ -68,7 +69,7 @@ def test_learner_killed_comes_back_from_its_state_with_a_higher_version(tmp_path
         since.append(since[0] if since else time.time())
         return state.exists() and state.stat().st_mtime > since[0]
 
-    # The chaos suite's learner fault settings (tools.chaos.FAULTS): states often, workers held to
+    # The chaos suite's learner fault settings (tools.chaos.faults.FAULTS): states often, workers held to
     # the learner, so a state with updates in it is written long before the budget is spent.
     run_dir, summary, replay, _ = run_with_fault(tmp_path, "learner", at_steps=1500, extra=saved_after_training_began,
                                                  **FAULTS["learner"]["overrides"])
