@@ -100,7 +100,7 @@ def _never_hang_at_exit() -> None:
     joins those threads for ever: a learner actor was found two hours later, orphaned, its main
     thread in ``threading._shutdown``. By then the component has written everything it keeps
     (checkpoints are written by its own loops and at stop), so flushing the log streams and
-    ``os._exit`` lose nothing; it is what ``laneshift.tools.cli`` does for the service processes.
+    ``os._exit`` lose nothing; it is what ``laneshift.tools.cli_services`` does for the service processes.
     ``threading._register_atexit`` runs before that join (there is no public hook that does)."""
 
     def leave() -> None:

@@ -12,7 +12,7 @@ from typing import TextIO
 
 from laneshift.config import RunConfig
 
-from .launch import default_demo_dir, ensure_demo_shard, train  # noqa: F401 - re-exported
+from .launch import train
 
 
 def train_local(cfg: RunConfig, out: TextIO = sys.stdout, *, resume: bool = False, overwrite: bool = False) -> int:

@@ -2,7 +2,7 @@
 learner's last status, replay losses, restarts, the final greedy evaluation).
 
 It reads a ``RunEnd`` (what the launcher's ``Run`` knows when its components have stopped), never
-the launcher itself: ``deploy.launch`` imports this module.
+the launcher itself: ``deploy.launch`` and ``deploy.supervision`` import this module.
 
 Room: deploy, the wiring. May import: the contract, the env-running side's evaluation and the
 learner's metrics log (for the final evaluation's TensorBoard scalars).
@@ -21,7 +21,7 @@ from laneshift.config import RunConfig
 
 @dataclass(frozen=True)
 class RunEnd:
-    """A finished run, as the summary reads it (``deploy.launch.Run.ended``)."""
+    """A finished run, as the summary reads it (``deploy.supervision.Run.ended``)."""
 
     cfg: RunConfig
     workers: list[dict]  # each env worker's final summary, in the builder's order (those that returned one)

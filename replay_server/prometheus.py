@@ -36,6 +36,27 @@ def _family(kind: str, name: str, help_text: str, samples: list[tuple[dict[str, 
     return family
 
 
+#: The families of one number each read from a section of the stats (absent while the section has no
+#: such key): (key, kind, name, help) for the rate limiter's, the last checkpoint's and the log's.
+_RATE_LIMITER = (
+    ("insert_ok", "gauge", "rate_limiter_insert_ok", "1 while actors may insert."),
+    ("size_ok", "gauge", "rate_limiter_size_ok", "1 once the online table has min_size items."),
+    ("rows_owed_to_learner", "gauge", "rate_limiter_rows_owed",
+     "Rows the learner may still sample (absent without a ratio)."),
+    ("samples_per_insert", "gauge", "rate_limiter_samples_per_insert", "Configured sampled rows per inserted item."),
+    ("tolerance", "gauge", "rate_limiter_tolerance_rows", "Configured slack either side of the ratio."),
+    ("min_size", "gauge", "rate_limiter_min_size", "Online items needed before sampling."))
+_CHECKPOINT = (
+    ("age_s", "gauge", "checkpoint_age_seconds", "Seconds since the last checkpoint (absent before the first)."),
+    ("items", "gauge", "checkpoint_items", "Items in the last checkpoint."),
+    ("seconds", "gauge", "checkpoint_duration_seconds", "How long the last checkpoint took."),
+    ("failures", "counter", "checkpoint_failures", "Checkpoint writes that failed (e.g. a full disk)."))
+_WAL = (
+    ("bytes", "gauge", "wal_bytes", "Bytes of write-ahead log a restart would replay (absent without a log)."),
+    ("records_written", "counter", "wal_records", "Records written to the write-ahead log (absent without a log)."),
+    ("failures", "counter", "wal_failures", "Write-ahead log writes that failed (e.g. a full disk)."))
+
+
 def stats_metrics(stats: dict) -> list:
     """``full_stats()`` as metric families (the counters are the core's own, read at scrape time)."""
     t = stats["tables"]
@@ -89,29 +110,9 @@ def stats_metrics(stats: dict) -> list:
             ("env_steps", "counter", "actor_env_steps", "An actor's cumulative env steps."),
             ("last_version", "gauge", "actor_weights_version", "Newest weights version an actor acted with.")):
         out.append(_family(kind, name, help_text, [({"actor": a}, s.get(field)) for a, s in actors]))
-    out += [
-        _family("gauge", "rate_limiter_insert_ok", "1 while actors may insert.", one(rl.get("insert_ok"))),
-        _family("gauge", "rate_limiter_size_ok", "1 once the online table has min_size items.", one(rl.get("size_ok"))),
-        _family("gauge", "rate_limiter_rows_owed", "Rows the learner may still sample (absent without a ratio).",
-                one(rl.get("rows_owed_to_learner"))),
-        _family("gauge", "rate_limiter_samples_per_insert", "Configured sampled rows per inserted item.",
-                one(rl.get("samples_per_insert"))),
-        _family("gauge", "rate_limiter_tolerance_rows", "Configured slack either side of the ratio.",
-                one(rl.get("tolerance"))),
-        _family("gauge", "rate_limiter_min_size", "Online items needed before sampling.", one(rl.get("min_size"))),
-        _family("gauge", "checkpoint_age_seconds", "Seconds since the last checkpoint (absent before the first).",
-                one(ckpt.get("age_s"))),
-        _family("gauge", "checkpoint_items", "Items in the last checkpoint.", one(ckpt.get("items"))),
-        _family("gauge", "checkpoint_duration_seconds", "How long the last checkpoint took.", one(ckpt.get("seconds"))),
-        _family("counter", "checkpoint_failures", "Checkpoint writes that failed (e.g. a full disk).",
-                one(ckpt.get("failures", 0))),
-        _family("gauge", "wal_bytes", "Bytes of write-ahead log a restart would replay (absent without a log).",
-                one(wal.get("bytes"))),
-        _family("counter", "wal_records", "Records written to the write-ahead log (absent without a log).",
-                one(wal.get("records_written"))),
-        _family("counter", "wal_failures", "Write-ahead log writes that failed (e.g. a full disk).",
-                one(wal.get("failures"))),
-    ]
+    ckpt = {"failures": 0, **ckpt}  # 0 failures shows before the first checkpoint too
+    for section, fields in ((rl, _RATE_LIMITER), (ckpt, _CHECKPOINT), (wal, _WAL)):
+        out += [_family(kind, name, help_text, one(section.get(key))) for key, kind, name, help_text in fields]
     return out
 
 

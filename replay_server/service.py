@@ -428,7 +428,7 @@ class ReplayServer:
                   flush=True)
         self.close()
         # No thread of ours may still be inside a zenoh call when the interpreter finalizes (see
-        # cli._end_service_process); the sessions are closed, so their channels have woken them.
+        # tools/cli_services.py, end_service_process); the sessions are closed, so their channels have woken them.
         left = self.service.join(timeout_s=10.0)
         if left:
             print(f"{self.who}: threads still running after the sessions closed: {', '.join(left)}",

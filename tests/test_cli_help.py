@@ -35,7 +35,7 @@ def _options(parser: argparse.ArgumentParser) -> list[argparse.Action]:
             if a.option_strings and not isinstance(a, (argparse._HelpAction, argparse._SubParsersAction))]
 
 
-#: Options of commands whose module is not the CLI's own (tools/chaos.py): known, to be given a help there.
+#: Options of commands whose module is not the CLI's own (tools/chaos/): known, to be given a help there.
 KNOWN_WITHOUT_HELP: set[str] = set()
 
 

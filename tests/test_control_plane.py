@@ -23,7 +23,8 @@ from laneshift import wire
 from laneshift.config import ConfigError, ReplayConfig, load_run_config
 from laneshift.deploy.builder import Builder
 from laneshift.replay_server.checkpoint import CheckpointError, restore_checkpoint, write_checkpoint
-from laneshift.replay_server.core import ACTORS_IN_STATS, MAX_ACTOR_PAGE, ReplayCore
+from laneshift.replay_server.actor_ledger import MAX_ACTOR_PAGE
+from laneshift.replay_server.core import ACTORS_IN_STATS, ReplayCore
 
 SCHEMA = wire.TransitionSchema((4,), "float32", 9)
 

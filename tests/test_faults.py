@@ -23,8 +23,9 @@ from pathlib import Path
 import pytest
 
 from laneshift.config import load_run_config
-from laneshift.tools.chaos import FAST, FAULTS, FaultInjector, checkpointing
-from laneshift.tools.chaos import alive as _alive
+from laneshift.tools.chaos.faults import FAST, FAULTS
+from laneshift.tools.chaos.runs import alive as _alive
+from laneshift.tools.chaos.strikes import FaultInjector, checkpointing
 from laneshift.deploy.processes import descendants as _descendants
 from laneshift.deploy.local import train_local
 
@@ -68,7 +69,7 @@ def test_learner_killed_comes_back_from_its_state_with_a_higher_version(tmp_path
         since.append(since[0] if since else time.time())
         return state.exists() and state.stat().st_mtime > since[0]
 
-    # The chaos suite's learner fault settings (tools.chaos.FAULTS): states often, workers held to
+    # The chaos suite's learner fault settings (tools.chaos.faults.FAULTS): states often, workers held to
     # the learner, so a state with updates in it is written long before the budget is spent.
     run_dir, summary, replay, _ = run_with_fault(tmp_path, "learner", at_steps=1500, extra=saved_after_training_began,
                                                  **FAULTS["learner"]["overrides"])
@@ -156,7 +157,7 @@ def test_a_service_killed_as_the_workers_finish_is_still_counted(tmp_path, monke
     """The race CI met: the replay server died in the run's last moments, after the workers'
     results were in but before ``ray.wait`` saw its run() fail, and the summary read "restarts
     none". Here the kill lands exactly there; the sweep before the stop must find it by its pid."""
-    from laneshift.deploy.launch import Run
+    from laneshift.deploy.supervision import Run
 
     run_dir = tmp_path / "run"
     sweep, killed = Run._sweep_services, []
@@ -190,7 +191,8 @@ def test_a_used_run_dir_is_refused_and_a_second_launcher_too(tmp_path):
     assert train_local(cfg, out=out) == 1
     assert "already holds a run" in out.getvalue() and "--resume" in out.getvalue()
 
-    from laneshift.deploy.launch import LaunchError, RunDirLock
+    from laneshift.deploy.errors import LaunchError
+    from laneshift.deploy.run_dir import RunDirLock
 
     other = tmp_path / "other"
     with pytest.raises(LaunchError, match="in use by another"):
@@ -294,7 +296,8 @@ def test_the_router_runs_in_a_local_launcher_and_as_an_actor_on_a_cluster():
     """``deploy.router_in``: auto puts a local run's router in the launcher (whose death ends a
     local run anyway) and a cluster run's in its own actor; the launcher is refused on a cluster."""
     from laneshift.deploy.errors import LaunchError
-    from laneshift.deploy.launch import Run, StopSignals
+    from laneshift.deploy.stop_signals import StopSignals
+    from laneshift.deploy.supervision import Run
 
     def in_launcher(local: bool, **overrides) -> bool:
         return Run(load_run_config(overrides=overrides), local=local, out=io.StringIO(),

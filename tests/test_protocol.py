@@ -19,8 +19,9 @@ import numpy as np
 import pytest
 import yaml
 
-from laneshift.tools.studies.protocol import (VALIDATION_SEED, eval_command, register, stability_drop,
-                                        time_to_threshold)
+from laneshift.tools.studies.protocol import register
+from laneshift.tools.studies.protocol_publish import eval_command
+from laneshift.tools.studies.protocol_validation import VALIDATION_SEED, stability_drop, time_to_threshold
 
 TINY = ["--set", "replay.capacity=2000", "--set", "replay.min_size=200", "--set", "learner.hidden=32",
         "--set", "learner.batch_size=32", "--set", "replay.spi_tolerance=1024",
@@ -46,7 +47,7 @@ def test_time_to_threshold_and_the_largest_drop_after_the_target_on_hand_made_cu
 
 
 def test_the_validation_figure_is_the_mean_over_seeds(tmp_path):
-    from laneshift.tools.studies.protocol import plot_validation
+    from laneshift.tools.studies.protocol_validation import plot_validation
 
     runs = [{"seed": seed, "validation": {"curve": [{**r, "episodes": 20} for r in _curve(points)]}}
             for seed, points in ((0, [(100, 0.5), (200, 0.9), (300, 0.95)]), (1, [(150, 0.2), (250, 0.7), (320, 0.9)]))]

@@ -299,12 +299,12 @@ def test_a_batch_after_the_copy_is_counted_lost_not_hidden_by_later_stats(tmp_pa
 
 
 def test_per_actor_state_is_bounded_and_idle_actors_are_evicted(monkeypatch):
-    import laneshift.replay_server.core as core_mod
+    import laneshift.replay_server.actor_ledger as ledger_mod
 
-    monkeypatch.setattr(core_mod, "MAX_ACTORS", 4)
+    monkeypatch.setattr(ledger_mod, "MAX_ACTORS", 4)
     core = ReplayCore(ReplayConfig(capacity=1000, min_size=1, actor_idle_evict_s=60), SCHEMA)
     clock = [1000.0]
-    monkeypatch.setattr(core_mod.time, "monotonic", lambda: clock[0])
+    monkeypatch.setattr(ledger_mod.time, "monotonic", lambda: clock[0])
     for i in range(4):
         assert core.ingest(batch(0, actor=f"a{i}")) is None
         clock[0] += 1

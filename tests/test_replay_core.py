@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 
 from laneshift import wire
 from laneshift.config import ReplayConfig
-from laneshift.replay_server import core as core_module
+from laneshift.replay_server import actor_ledger
 from laneshift.replay_server.core import ReplayCore
 from laneshift.replay_server.rate_limiter import SampleToInsertRatio
 from laneshift.replay_server.storage import DemoTable, RingTable
@@ -354,7 +354,7 @@ def test_per_actor_counters_and_seq_gaps():
 
 
 def test_too_many_actors(monkeypatch):
-    monkeypatch.setattr(core_module, "MAX_ACTORS", 2)
+    monkeypatch.setattr(actor_ledger, "MAX_ACTORS", 2)
     core = make_core()
     assert core.ingest(tmsg("a"), "a") is None and core.ingest(tmsg("b"), "b") is None
     assert core.ingest(tmsg("c"), "c") == "too_many_actors"

@@ -23,7 +23,7 @@ import pytest
 from laneshift import transport, wire
 from laneshift.actors.worker import expand_version_runs
 from laneshift.config import load_run_config
-from laneshift.tools.chaos import alive as _alive
+from laneshift.tools.chaos.runs import alive as _alive
 from laneshift.deploy.processes import descendants as _descendants
 from laneshift.deploy.local import train_local
 from laneshift.tools.bench.run import process_label

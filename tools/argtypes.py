@@ -1,7 +1,8 @@
 """The argparse pieces every command shares: the number types (``positive_int``,
 ``non_negative_int``, ``positive_float``, ``non_negative_float``, ``fraction``), ``comma_list``,
-``endpoint`` (a zenoh endpoint), ``seed_list`` (the studies' ``--seeds``) and the
-``--set SECTION.FIELD=VALUE`` option (``add_set_arg``, ``parse_set``). A bad value is an ``argparse.ArgumentTypeError`` naming what was expected, which
+``endpoint`` (a zenoh endpoint), ``seed_list`` (the studies' ``--seeds``), the
+``--set SECTION.FIELD=VALUE`` option (``add_set_arg``, ``parse_set``) and the ``--config`` file with
+it (``add_config_args``, and ``config_from``: the run config they give). A bad value is an ``argparse.ArgumentTypeError`` naming what was expected, which
 the parser turns into one line and exit code 2.
 
 The ``laneshift`` command (``laneshift.tools.cli``) and the sub-commands it registers (the studies, the
@@ -19,7 +20,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from laneshift.config import ConfigError
+from laneshift.config import ConfigError, RunConfig, load_run_config
 
 
 def positive_int(text: str) -> int:
@@ -97,6 +98,20 @@ def add_set_arg(p: argparse.ArgumentParser) -> None:
     p.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
                    help="override any config field, e.g. --set learner.lr=1e-4 (repeatable; `laneshift config "
                         "fields TEXT` says what each field does)")
+
+
+def add_config_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", help="YAML/TOML/JSON file with sections env, actor, replay, learner, transport, train")
+    add_set_arg(p)
+
+
+def config_from(args: argparse.Namespace, shortcuts: dict[str, Any] | None = None,
+                 preset: dict[str, Any] | None = None, base: RunConfig | None = None) -> RunConfig:
+    """``--config`` file < ``preset`` (a named method's settings) < flag shortcuts < ``--set``."""
+    overrides: dict[str, Any] = dict(preset or {})
+    overrides.update({k: v for k, v in (shortcuts or {}).items() if v is not None})
+    overrides.update(parse_set(args.set))
+    return load_run_config(args.config, overrides, base=base)
 
 
 def seed_list(text: str) -> list[int]:

@@ -33,8 +33,9 @@ from gymnasium import spaces
 
 from laneshift.envspec import ALLROADS
 
-from .lane_change import (CurveLaneChangeEnv, LaneChangeEnv, MergeLaneChangeEnv, NpcPolicy,
-                          RoundaboutLaneChangeEnv, StraightLaneChangeEnv)
+from .lane_change import (CurveLaneChangeEnv, LaneChangeEnv, MergeLaneChangeEnv, RoundaboutLaneChangeEnv,
+                          StraightLaneChangeEnv)
+from .policy_vehicles import NpcPolicy
 from .observations import OBS_LIMIT
 
 ROAD_ENVS: dict[str, type[LaneChangeEnv]] = {

@@ -1,7 +1,9 @@
 """The paper's lane-change environments (figure 3 (a)-(d)) on highway-env's road and vehicle models.
 
 One class, :class:`LaneChangeEnv`, parameterised by a scenario layout (scenarios.py); the four
-registered ids are its subclasses.  Per step (``policy_frequency`` Hz, default 10 Hz):
+registered ids are its subclasses (``road_env``).  Its bases hold the lane queries (lanes.py), how
+an action drives a vehicle (driving.py) and the policy vehicles (policy_vehicles.py); this module
+validates the options and runs reset and step.  Per step (``policy_frequency`` Hz, default 10 Hz):
 
 1. the ego action is decoded - paper action (dv, kappa) or a highway-env meta action;
 2. policy vehicles (copies of the agent) get their own vector observations and act through the
@@ -22,30 +24,27 @@ another component.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from highway_env.road.road import Road
-from highway_env.vehicle.controller import ControlledVehicle
 from highway_env.vehicle.kinematics import Vehicle
 
 from . import scenarios
-from .actions import META_ACTIONS, SPEED_CHANGES, curvature_to_steering, paper_actions
-from .control import curvature_index, lane_errors, meta_acceleration, meta_steering
-from .observations import OBS_LIMIT, lane_block, vector_observation, vector_size
+from .actions import META_ACTIONS, paper_actions
+from .driving import Driving
+from .lanes import LaneQueries
+from .observations import OBS_LIMIT, vector_observation, vector_size
+from .policy_vehicles import NpcPolicy, PolicyVehicles
 from .rendering import TopDownRenderer
 from .rewards import DEFAULT_REWARD_PRESET, REWARD_TERM_NAMES, compute_reward, get_preset, motion_flags
-from .traffic import AgentVehicle, Loc, Traffic, collisions, locate
-
-NpcPolicy = Callable[[np.ndarray], Sequence[int] | np.ndarray]
+from .traffic import AgentVehicle, Traffic, collisions, locate
 
 #: Default meta-action speed grid [m/s] (highway-env's default 20-30 m/s is faster than this traffic).
 META_TARGET_SPEEDS = (6.0, 8.0, 10.0, 12.0, 14.0, 16.0, 18.0)
-#: Smallest distance [m] from the ego vehicle at which policy vehicles start or re-enter.
-POLICY_SPAWN_DISTANCE = 40.0
 
 
 def _int_arg(name: str, value: Any, lo: int, hi: int | None = None) -> int:
@@ -66,7 +65,7 @@ def _float_arg(name: str, value: Any, lo: float, hi: float = math.inf, lo_open: 
     return v
 
 
-class LaneChangeEnv(gym.Env):
+class LaneChangeEnv(LaneQueries, Driving, PolicyVehicles, gym.Env):
     """Lane change towards a target lane among constant-speed (and policy-driven) traffic.
 
     All options are flat constructor keyword arguments (see docs/environments.md for the table).
@@ -231,70 +230,6 @@ class LaneChangeEnv(gym.Env):
             out.append(veh)
         return out
 
-    def lane_occupants(self, lane: int, exclude: AgentVehicle | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """(arc length on ``lane``, speed) of every vehicle whose body overlaps ``lane``
-        (constant-speed traffic on it, plus agents within a lane width of its centre)."""
-        mask = self.traffic.lane == lane
-        s, v = [self.traffic.s[mask]], [self.traffic.speed[mask]]
-        for a in [self.ego, *self.agents]:
-            if a is None or a is exclude or not a.active or a.loc is None:
-                continue
-            if a.loc.inside[lane] and abs(a.loc.lat[lane]) < self.layout.paths[lane].width - 0.5:
-                s.append(np.array([a.loc.s[lane]]))
-                v.append(np.array([a.speed * math.cos(a.heading - a.loc.heading[lane])]))
-        return np.concatenate(s), np.concatenate(v)
-
-    def lane_neighbours(self, v: AgentVehicle, lane: int) -> tuple[float, float, float, float]:
-        """(gap ahead, speed ahead, gap behind, speed behind) around ``v`` on ``lane``: bumper-to-
-        bumper distances [m] (``inf`` when nobody is there) and speeds along the lane [m/s]."""
-        s_occ, v_occ = self.lane_occupants(lane, exclude=v)
-        if s_occ.size == 0:
-            return math.inf, 0.0, math.inf, 0.0
-        d = self.lane_gap(lane, v.loc.s[lane], s_occ)
-        ahead, behind = d >= 0, d < 0
-        front = rear = math.inf
-        v_front = v_rear = 0.0
-        if ahead.any():
-            i = int(np.argmin(np.where(ahead, d, np.inf)))
-            front, v_front = float(d[i]) - v.LENGTH, float(v_occ[i])
-        if behind.any():
-            i = int(np.argmax(np.where(behind, d, -np.inf)))
-            rear, v_rear = float(-d[i]) - v.LENGTH, float(v_occ[i])
-        return front, v_front, rear, v_rear
-
-    def lanes_adjacent(self, loc: Loc, lane: int, other: int) -> bool:
-        """Is ``other`` a lane of the road right next to ``lane`` where ``loc`` is (one lane width
-        apart laterally; the merge ramp is adjacent to the main road only along its parallel part)?"""
-        if not 0 <= other < self.layout.lanes_count or not loc.inside[other]:
-            return False
-        return abs(abs(loc.lat[lane] - loc.lat[other]) - self.layout.paths[other].width) < 0.5
-
-    def adjacent_lane(self, v: AgentVehicle, side: int) -> int | None:
-        """The lane next to ``v``'s on ``side`` (-1 left, +1 right), if the road has one there."""
-        lane = v.loc.lane + side
-        return lane if self.lanes_adjacent(v.loc, v.loc.lane, lane) else None
-
-    def _lane_features(self, v: AgentVehicle) -> np.ndarray:
-        loc = v.loc
-        forward = v.speed * math.cos(v.heading - loc.heading[loc.lane])
-        slots = []
-        for lane in (loc.lane, self.adjacent_lane(v, -1), self.adjacent_lane(v, +1)):
-            if lane is None:
-                slots.append(None)
-                continue
-            front, v_front, rear, v_rear = self.lane_neighbours(v, lane)
-            slots.append((front, v_front - forward, rear, v_rear - forward))
-        return lane_block(slots, self.alongside_features)
-
-    def lane_gap(self, lane: int, s_from: float, s_to: float | np.ndarray) -> float | np.ndarray:
-        """Signed arc-length difference s_to - s_from on ``lane`` (wrapped on rings); ``s_to`` may
-        be an array."""
-        d = s_to - s_from
-        path = self.layout.paths[lane]
-        if path.closed:
-            d = (d + path.length / 2) % path.length - path.length / 2
-        return d
-
     # ------------------------------------------------------------------------------------------
     # gymnasium API
     # ------------------------------------------------------------------------------------------
@@ -342,29 +277,10 @@ class LaneChangeEnv(gym.Env):
         self.traffic.populate(rng, per_lane, list(self.anchor), lane, self.min_gap, self.ego_clearance)
         self.traffic.place(self.anchor)
 
-        # Policy vehicles replace randomly chosen traffic vehicles away from the ego vehicle.
-        self.agents = []
-        if self.policy_vehicles:
-            rel = np.array([self.lane_gap(int(ln), self.anchor[ln], s) for ln, s in zip(self.traffic.lane, self.traffic.s)])
-            far = np.flatnonzero(np.abs(rel) >= POLICY_SPAWN_DISTANCE)
-            if far.size < self.policy_vehicles:
-                far = np.argsort(-np.abs(rel))[: self.policy_vehicles]
-            chosen = rng.choice(far, size=self.policy_vehicles, replace=False)
-            for j in chosen:
-                agent = AgentVehicle(
-                    layout, float(self.traffic.x[j]), float(self.traffic.y[j]), float(self.traffic.h[j]),
-                    float(self.traffic.speed[j]), kind="policy",
-                )
-                agent.road = self.road
-                agent.hints = [p.segment_at(float(self.traffic.s[j])) for p in layout.paths]
-                self._locate(agent)
-                self.agents.append(agent)
-            self.traffic.remove(chosen)
-            self.traffic.place(self.anchor)
+        self._spawn_policy_vehicles(rng)
         self.road.vehicles = [self.ego, *self.agents]
         for v in self.road.vehicles:
-            v.meta_lane = v.loc.lane
-            v.meta_speed_index = int(np.argmin(np.abs(self.meta_target_speeds - v.speed)))
+            self._meta_targets(v)
 
         self.steps = 0
         self.time = 0.0
@@ -438,65 +354,6 @@ class LaneChangeEnv(gym.Env):
     def _locate(self, v: AgentVehicle) -> None:
         v.loc = locate(self.layout, float(v.position[0]), float(v.position[1]), v.hints)
 
-    def _command(self, v: AgentVehicle, action: int) -> None:
-        if self.action_set == "paper":
-            dv, kappa = self.actions[action]
-            # Paper curvature is left-positive; highway-env's world heading grows to the right.
-            v.action = {
-                "steering": curvature_to_steering(-kappa, v.LENGTH),
-                "acceleration": dv * self.policy_frequency,
-            }
-            return
-        label = META_ACTIONS[action]
-        if label in ("LANE_LEFT", "LANE_RIGHT"):
-            # Like highway-env's is_reachable_from: only a lane adjacent to the current target lane.
-            cand = v.meta_lane + (-1 if label == "LANE_LEFT" else 1)
-            if self.lanes_adjacent(v.loc, v.meta_lane, cand):
-                v.meta_lane = cand
-        elif label == "FASTER":
-            v.meta_speed_index = min(v.meta_speed_index + 1, self.meta_target_speeds.size - 1)
-        elif label == "SLOWER":
-            v.meta_speed_index = max(v.meta_speed_index - 1, 0)
-
-    def _meta_control(self, v: AgentVehicle) -> None:
-        lane = v.meta_lane
-        path = self.layout.paths[lane]
-        s_ahead = v.loc.s[lane] + v.speed * ControlledVehicle.TAU_PURSUIT
-        v.action = {
-            "steering": meta_steering(v.loc.lat[lane], path.heading_at(s_ahead), v.heading, v.speed, v.LENGTH),
-            "acceleration": meta_acceleration(float(self.meta_target_speeds[v.meta_speed_index]), v.speed),
-        }
-
-    def _policy_actions(self) -> list[int]:
-        """One action per policy vehicle (inactive ones get 0 and are not simulated)."""
-        active = [i for i, a in enumerate(self.agents) if a.active]
-        actions = [0] * len(self.agents)
-        if not active:
-            return actions
-        if self.npc_policy is None:
-            for i in active:
-                actions[i] = self._keep_lane_action(self.agents[i])
-            return actions
-        batch = np.stack([self._vector_obs(self.agents[i]) for i in active])
-        out = np.asarray(self.npc_policy(batch)).reshape(-1)
-        if out.size != len(active):
-            raise ValueError(f"npc policy returned {out.size} actions for {len(active)} observations")
-        for i, act in zip(active, out):
-            act = int(act)
-            if not 0 <= act < self.action_space.n:
-                raise ValueError(f"npc policy returned action {act}, outside [0, {self.action_space.n})")
-            actions[i] = act
-        return actions
-
-    def _keep_lane_action(self, v: AgentVehicle) -> int:
-        if not v.active:
-            return 0
-        if self.action_set == "meta":
-            return 1  # IDLE
-        offset, rel, curv = lane_errors(v.loc, v.loc.lane, v.heading)
-        k = curvature_index(offset, rel, curv, v.speed / self.policy_frequency, self.curvature_step)
-        return 3 * SPEED_CHANGES.index(0) + k
-
     def _others(self, exclude: AgentVehicle) -> tuple[np.ndarray, ...]:
         t = self.traffic
         extra = [a for a in (self.ego, *self.agents) if a is not exclude and a.active]
@@ -561,64 +418,6 @@ class LaneChangeEnv(gym.Env):
         e.offroad = offroad
         return collided, offroad
 
-    def _check_agents(self) -> None:
-        if not self.agents:
-            return
-        t = self.traffic
-        for a in self.agents:
-            if not a.active:
-                continue
-            self._locate(a)
-            x, y = float(a.position[0]), float(a.position[1])
-            crashed = a.crashed or not a.loc.on_road
-            if not crashed:
-                crashed = collisions(x, y, a.heading, a.LENGTH, a.WIDTH, t.x, t.y, t.h).size > 0
-            if not crashed:
-                for b in self.agents:
-                    if b is not a and b.active and collisions(
-                        x, y, a.heading, a.LENGTH, a.WIDTH, b.position[:1], b.position[1:], np.array([b.heading])
-                    ).size:
-                        crashed = b.crashed = True
-            lane = a.loc.lane
-            path = self.layout.paths[lane]
-            out = False
-            if not path.closed:
-                rel = a.loc.s[lane] - self.anchor[lane]
-                out = rel < -self.traffic.back or rel > self.traffic.front
-            if crashed or out:
-                self._respawn(a)
-
-    def _respawn(self, a: AgentVehicle) -> None:
-        """Put a crashed / out-of-window policy vehicle back on a free spot away from the ego vehicle."""
-        rng = self.np_random
-        layout = self.layout
-        lanes = [ln for ln in layout.npc_lanes if ln in layout.spawn_lanes]
-        a.crashed = False
-        for _ in range(10):
-            lane = int(rng.choice(lanes))
-            path = layout.paths[lane]
-            if path.closed:
-                rel = rng.uniform(POLICY_SPAWN_DISTANCE, path.length - POLICY_SPAWN_DISTANCE)
-            else:
-                side = rng.integers(2)
-                lo, hi = (POLICY_SPAWN_DISTANCE, self.traffic.front - 10.0) if side else (-self.traffic.back + 10.0, -POLICY_SPAWN_DISTANCE)
-                rel = rng.uniform(lo, hi)
-            s = self.anchor[lane] + rel
-            occ_s, _ = self.lane_occupants(lane, exclude=a)
-            if occ_s.size and np.min(np.abs([self.lane_gap(lane, s, o) for o in occ_s])) < self.min_gap:
-                continue
-            x, y, h = (float(v[0]) for v in path.position(np.array([s])))
-            a.position = np.array([x, y])
-            a.heading = h
-            a.speed = float(self.lane_speeds[lane])
-            a.hints = [p.segment_at(s) if p is path else a.hints[i] for i, p in enumerate(layout.paths)]
-            a.action = {"steering": 0.0, "acceleration": 0.0}
-            self._locate(a)
-            a.meta_lane = a.loc.lane
-            a.meta_speed_index = int(np.argmin(np.abs(self.meta_target_speeds - a.speed)))
-            return
-        a.active = False  # no free spot: the vehicle leaves the scene
-
     def _info(self, *, crashed: bool, collided: bool, terms: dict[str, float] | None, offroad: bool = False) -> dict[str, Any]:
         loc = self.ego.loc
         if terms is None:  # reset: no step taken yet
@@ -637,33 +436,19 @@ class LaneChangeEnv(gym.Env):
         }
 
 
-class StraightLaneChangeEnv(LaneChangeEnv):
-    """Fig. 3(a), the evaluation task: straight road, 300-step episodes by default."""
-
-    SCENARIO = "straight"
-    DEFAULT_MAX_STEPS = 300
-    DEFAULT_VEHICLES = 30
-
-
-class MergeLaneChangeEnv(LaneChangeEnv):
-    """Fig. 3(b): merge from an ending on-ramp into the main road (reward-study length 100)."""
-
-    SCENARIO = "merge"
-    DEFAULT_MAX_STEPS = 100
-    DEFAULT_VEHICLES = 20
+def road_env(scenario: str, max_steps: int, vehicles: int, doc: str) -> type[LaneChangeEnv]:
+    """The env class registered for one road: ``LaneChangeEnv`` on ``scenario``'s layout, with that
+    road's default episode length and traffic count."""
+    name = f"{scenario.capitalize()}LaneChangeEnv"
+    return type(name, (LaneChangeEnv,), {"__doc__": doc, "__module__": __name__, "__qualname__": name,
+                                         "SCENARIO": scenario, "DEFAULT_MAX_STEPS": max_steps,
+                                         "DEFAULT_VEHICLES": vehicles})
 
 
-class CurveLaneChangeEnv(LaneChangeEnv):
-    """Fig. 3(c): lane change on a winding road (reward-study length 100)."""
-
-    SCENARIO = "curve"
-    DEFAULT_MAX_STEPS = 100
-    DEFAULT_VEHICLES = 30
-
-
-class RoundaboutLaneChangeEnv(LaneChangeEnv):
-    """Fig. 3(d): lane change on a multi-lane ring (reward-study length 100)."""
-
-    SCENARIO = "roundabout"
-    DEFAULT_MAX_STEPS = 100
-    DEFAULT_VEHICLES = 96
+StraightLaneChangeEnv = road_env("straight", 300, 30, "Fig. 3(a), the evaluation task: straight road, 300-step "
+                                 "episodes by default.")
+MergeLaneChangeEnv = road_env("merge", 100, 20, "Fig. 3(b): merge from an ending on-ramp into the main road "
+                              "(reward-study length 100).")
+CurveLaneChangeEnv = road_env("curve", 100, 30, "Fig. 3(c): lane change on a winding road (reward-study length 100).")
+RoundaboutLaneChangeEnv = road_env("roundabout", 100, 96, "Fig. 3(d): lane change on a multi-lane ring "
+                                   "(reward-study length 100).")

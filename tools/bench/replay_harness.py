@@ -1,20 +1,27 @@
 """What the two replay benchmarks (``bench replay``, ``bench shards``) share: synthetic
 TRANSITIONS messages encoded once and re-stamped per send (``synthetic_message``), waiting for a
-router to listen, timing a call's latency, the sample batch they time and their error.
+router to listen and for child processes to be ready (``wait_ready``; a dead child is their error,
+``check_alive``), stopping the publisher processes (``stop_publishers``), timing a call's latency, the sample batch they time and their error.
 
 Room: the tools (benchmarks). May import: anything in laneshift.
 """
 
 from __future__ import annotations
 
+import json
+import signal
 import socket
 import struct
 import time
-from typing import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
 from laneshift import wire
+
+if TYPE_CHECKING:
+    from laneshift.deploy.processes import ProcessGroup
 
 SAMPLE_BATCH = 256  # rows of the sample requests both benches time
 
@@ -97,6 +104,49 @@ def wait_for_router(endpoint: str, check_alive: Callable[[], None], timeout_s: f
             if time.monotonic() > deadline:
                 raise BenchError(f"the router did not listen on {endpoint} within {timeout_s:g} s") from None
             time.sleep(0.05)
+
+
+def check_alive(group: ProcessGroup, names: list[str]) -> None:
+    """A BenchError (with the end of its log) if one of the children ``names`` of ``group`` exited."""
+    from laneshift.deploy.processes import ChildFailed
+
+    try:
+        group.check_alive(names)
+    except ChildFailed as exc:
+        raise BenchError(str(exc)) from None
+
+
+def wait_ready(group: ProcessGroup, ready: dict[str, Path], timeout_s: float,
+               on_failure: Callable[[], object] | None = None) -> None:
+    """Wait until each child of ``group`` (name -> its ready file) has written its ready file. One
+    that exits first, or is not ready within ``timeout_s``, is a BenchError (after ``on_failure``,
+    which stops what is no longer wanted)."""
+    from laneshift.deploy.processes import ChildFailed, wait_for_file
+
+    try:
+        for name, path in ready.items():
+            wait_for_file(path, timeout_s, group, name)
+    except ChildFailed as exc:
+        if on_failure is not None:
+            on_failure()
+        raise BenchError(str(exc)) from None
+
+
+def stop_publishers(group: ProcessGroup, pubs: list[dict]) -> dict[str, Any]:
+    """Stop the publisher processes ``pubs`` (each ``{"name", "proc", "report", ...}``): SIGTERM to all
+    at once, so they stop together, then each waited for (SIGKILL after 20 s). Returns each one's
+    report, by name (None where it left none, or none that reads as JSON)."""
+    for pub in pubs:
+        if pub["proc"].poll() is None:
+            pub["proc"].send_signal(signal.SIGTERM)
+    reports: dict[str, Any] = {}
+    for pub in pubs:
+        group.stop(pub["name"], grace_s=20)
+        try:
+            reports[pub["name"]] = json.loads(pub["report"].read_text())
+        except (OSError, ValueError):
+            reports[pub["name"]] = None
+    return reports
 
 
 def time_calls(once: Callable[[], float], duration: float, warmup_n: int, min_n: int) -> dict:

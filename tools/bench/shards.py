@@ -47,8 +47,8 @@ from laneshift.config import TransportConfig
 from laneshift.progress import write as progress_write
 
 from .cpu_meter import CpuMeter
-from .replay_harness import (MESSAGES_PER_ACTOR, SAMPLE_BATCH, BenchError, synthetic_message, time_calls,
-                             wait_for_router)
+from .replay_harness import (MESSAGES_PER_ACTOR, SAMPLE_BATCH, BenchError, check_alive, stop_publishers, synthetic_message,
+                             time_calls, wait_for_router, wait_ready)
 
 
 def register(subparsers: Any) -> None:
@@ -204,7 +204,6 @@ class _ShardBench:
         """One zero-work queryable (``_floor_main``) per shard, each where that shard runs, each
         answering with a shard's part of a request (SAMPLE_BATCH / shards rows, as ``split_rows``
         gives them at equal sizes)."""
-        from laneshift.deploy.processes import ChildFailed, wait_for_file
         from laneshift.learner.shards import split_rows
 
         names = []
@@ -214,24 +213,14 @@ class _ShardBench:
                                     "--router", self.endpoint, "--ready", str(self.work / f"{name}.ready"),
                                     "--index", str(i), "--rows", str(rows)])
             names.append(name)
-        try:
-            for name in names:
-                wait_for_file(self.work / f"{name}.ready", 60, self.group, name)
-        except ChildFailed as exc:
-            raise BenchError(str(exc)) from None
+        wait_ready(self.group, {name: self.work / f"{name}.ready" for name in names}, 60)
         return names
 
     def check_router(self) -> None:
-        from laneshift.deploy.processes import ChildFailed
-
-        try:
-            self.group.check_alive(["router"])
-        except ChildFailed as exc:
-            raise BenchError(str(exc)) from None
+        check_alive(self.group, ["router"])
 
     def start_servers(self, run_id: str, shards: int) -> list[str]:
         from laneshift.config import load_run_config, save_run_config
-        from laneshift.deploy.processes import ChildFailed, wait_for_file
 
         cfg = load_run_config(overrides={
             "env.scenario": "straight", "env.observation": "vector", "replay.capacity": self.args.capacity,
@@ -245,11 +234,7 @@ class _ShardBench:
             self.group.start(name, [*self.host(i), *self.py, "replay-server", "--config", str(path), "--shard", str(i),
                                     "--ready-file", str(ready)])
             names.append(name)
-        try:
-            for name in names:
-                wait_for_file(self.work / f"{name}.ready", 120, self.group, name)
-        except ChildFailed as exc:
-            raise BenchError(str(exc)) from None
+        wait_ready(self.group, {name: self.work / f"{name}.ready" for name in names}, 120)
         return names
 
     def stop(self, names: list[str]) -> None:
@@ -260,8 +245,6 @@ class _ShardBench:
                 proc.wait(30)
 
     def start_publishers(self, run_id: str, shards: int) -> list[dict]:
-        from laneshift.deploy.processes import ChildFailed, wait_for_file
-
         a = self.args
         actors = [f"a{i}" for i in range(a.actors)]
         pubs = []
@@ -272,25 +255,15 @@ class _ShardBench:
                     "--run-id", run_id, "--shards", str(shards), "--actors", ",".join(actors[j::a.publishers]),
                     "--batch", str(a.batch), "--seed", str(j), *(x for k, f in files.items() for x in (f"--{k}", str(f)))]
             pubs.append({"name": tag, "proc": self.group.start(tag, argv), **files})
-        try:
-            for pub in pubs:
-                wait_for_file(pub["ready"], 60, self.group, pub["name"])
-        except ChildFailed as exc:
-            self.stop_publishers(pubs)
-            raise BenchError(str(exc)) from None
+        wait_ready(self.group, {pub["name"]: pub["ready"] for pub in pubs}, 60, lambda: self.stop_publishers(pubs))
         return pubs
 
     def stop_publishers(self, pubs: list[dict]) -> dict[str, int]:
-        for pub in pubs:
-            if pub["proc"].poll() is None:
-                pub["proc"].send_signal(signal.SIGTERM)
+        """Every publisher stopped; how many transitions each actor sent (actors of a publisher that
+        left no report are missing)."""
         sent: dict[str, int] = {}
-        for pub in pubs:
-            self.group.stop(pub["name"], grace_s=20)
-            try:
-                sent.update(json.loads(pub["report"].read_text()))
-            except (OSError, ValueError):
-                pass
+        for report in stop_publishers(self.group, pubs).values():
+            sent.update(report or {})
         return sent
 
     def measure(self, shards: int) -> dict:

@@ -10,8 +10,8 @@ replot`` reads); ``road_results`` and ``render_road_table`` give the numbers and
 and initial lane, with the target one network on all four roads is held to (``TARGET``: >= 95 %
 survival and >= 90 % achievement on each road).
 
-Room: the tools (studies). May import: anything in laneshift but ``laneshift.tools.studies.protocol``
-(which imports this module).
+Room: the tools (studies). May import: anything in laneshift but the protocol's modules
+(``laneshift.tools.studies.protocol*``, which import this one).
 """
 
 from __future__ import annotations
@@ -24,8 +24,8 @@ import gymnasium as gym
 from laneshift.config import EnvConfig
 from laneshift.envspec import ALLROADS
 from laneshift.tools.studies.evaluate import INITIAL_LANES, Policy, evaluate_lanes, wilson_ci95
-from laneshift.tools.studies.table2 import across_seeds, lane_stats, pooled
-from laneshift.tools.studies.stats import RESAMPLES
+from laneshift.tools.studies.table2 import (across_seeds, driven_rates, driver_cells, lane_stats, learned_cells,
+                                            protocol_intro, rates_head)
 
 #: The target for one network on all four roads, on each road and initial lane (docs/environments.md).
 TARGET = {"survival": 0.95, "achievement": 0.90}
@@ -93,9 +93,7 @@ def road_results(runs: list[dict], drivers_by_road: dict[str, dict[str, dict]], 
         drivers = drivers_by_road[road]
         out[road] = {
             "methods": {method: stats},
-            "baselines": {name: {lane: {"survival": pooled([e], "survival_rate"),
-                                        "achievement": pooled([e], "achievement_rate")}
-                                 for lane, e in evals.items()} for name, evals in drivers.items()},
+            "baselines": driven_rates(drivers),
             "target_met": {lane: {m: stats[lane][m]["rate"] >= TARGET[m] for m in TARGET} for lane in INITIAL_LANES},
             "at_or_above_scripted": {lane: {m: stats[lane][m]["rate"] >= drivers[scripted_row][lane][f"{m}_rate"]
                                             for m in TARGET} for lane in INITIAL_LANES}}
@@ -105,37 +103,23 @@ def road_results(runs: list[dict], drivers_by_road: dict[str, dict[str, dict]], 
 def render_road_table(results: dict, driver_rows: tuple[str, str]) -> list[str]:
     """table.md's first part for allroads: one row per road and initial lane (then the four roads
     pooled): the learned rates beside the two drivers', the target and the scripted comparison."""
-    pct = "{:.1%}".format
-    method, test = results["method"], results["test"]
-    runs = results["methods"][method]["runs"]
-    n = len(runs)
-    lines = [f"**allroads, {method}**: one network for the four roads, {results['env_steps']:,} env steps per run, "
-             f"seeds {results['seeds']}, the final network of each run (no checkpoint selection). Test: on each "
-             f"road its own {test['episodes_per_lane']} greedy episodes per initial lane (episode seeds "
-             f"{test['episode_seed']:,}-{test['episode_seed'] + test['episodes_per_lane'] - 1:,} with the road "
-             f"pinned: the single-road protocol's episodes, so a row compares with that road's own networks), "
-             f"{test['max_steps']} steps each; the baselines drive the same episodes. Learned: mean of the per-seed "
-             f"rates" + (f" [95 % percentile bootstrap over seeds, {RESAMPLES:,} resamples]" if n > 1 else
-                         " (one seed: no interval)") + f", then each seed's rate. Target: >= {TARGET['survival']:.0%} "
-             f"survival and >= {TARGET['achievement']:.0%} achievement on each road. '{ALL_FOUR}': the four roads' "
-             f"episodes pooled. The validation episodes below draw their road from their seed (seed % 4).", "",
-             "| road | initial lane | survival | achievement | survival per seed | achievement per seed "
-             "| scripted driver (survival / achievement) | human-like stand-in (survival / achievement) "
-             f"| target {TARGET['survival']:.0%} / {TARGET['achievement']:.0%} met | learned mean at/above scripted |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+    runs = results["methods"][results["method"]]["runs"]
+    intro = protocol_intro(results, "allroads", network="one network for the four roads, ", where="on each road its own ",
+                           episodes_note=" with the road pinned: the single-road protocol's episodes, so a row "
+                                         "compares with that road's own networks")
+    lines = [intro + f" Target: >= {TARGET['survival']:.0%} survival and >= {TARGET['achievement']:.0%} achievement "
+             f"on each road. '{ALL_FOUR}': the four roads' episodes pooled. The validation episodes below draw their "
+             f"road from their seed (seed % 4).", "",
+             *rates_head(("road", "initial lane"), (f"target {TARGET['survival']:.0%} / {TARGET['achievement']:.0%} met",
+                                                    "learned mean at/above scripted"))]
     sections = [(road, road_runs(runs, road), results["roads"][road]["baselines"]) for road in ALLROADS]
     sections.append((ALL_FOUR, runs, results["baselines"]))
     for road, road_view, base in sections:
         for lane in INITIAL_LANES:
             stats = {m: across_seeds(road_view, lane, f"{m}_rate") for m in TARGET}
-            cells = [pct(st["rate"]) + (f" [{pct(st['ci95'][0])}, {pct(st['ci95'][1])}]" if n > 1 else "")
-                     for st in stats.values()]
-            per = [", ".join(pct(x) for x in st["per_seed"]) for st in stats.values()]
-            drivers = [f"{pct(base[name][lane]['survival']['rate'])} / {pct(base[name][lane]['achievement']['rate'])}"
-                       for name in driver_rows]
+            cells = learned_cells(list(stats.values())) + driver_cells(base, lane, driver_rows)
             met = ", ".join(f"{m} {'yes' if stats[m]['rate'] >= TARGET[m] else 'no'}" for m in TARGET)
             above = ", ".join(f"{m} {'yes' if stats[m]['rate'] >= base[driver_rows[0]][lane][m]['rate'] else 'no'}"
                               for m in TARGET)
-            lines.append(f"| {road} | {lane} | {cells[0]} | {cells[1]} | {per[0]} | {per[1]} | {drivers[0]} "
-                         f"| {drivers[1]} | {met} | {above} |")
+            lines.append(f"| {road} | {lane} | " + " | ".join(cells) + f" | {met} | {above} |")
     return lines

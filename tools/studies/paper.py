@@ -41,6 +41,7 @@ from laneshift.tools.studies import protocol
 from laneshift.tools.studies.evaluate import INITIAL_LANES
 from laneshift.tools.argtypes import seed_list
 from laneshift.tools.studies.plots import PAPER_TABLE2, plot_curves  # the paper's Table 2 (straight road, frames)
+from laneshift.tools.studies.provenance import command_line, write_json
 from laneshift.tools.studies.runs import collect_episodes, write_episodes
 from laneshift.tools.studies.table2 import HUMAN_LIKE_ROW, across_seeds
 from laneshift.tools.studies.stats import RESAMPLES, SEED
@@ -225,7 +226,7 @@ def run_paper(args: argparse.Namespace) -> dict:
                                "demo_episodes": episodes, "demo_shard": str(shard) if shard else None,
                                "env_steps": args.env_steps, "seeds": seed_list(args.seeds),
                                "eval_episodes": args.test_episodes, "eval_max_steps": args.eval_max_steps,
-                               "command": protocol.command_line(), "modes": {}, "methods": {}, "baselines": {}}
+                               "command": command_line(), "modes": {}, "methods": {}, "baselines": {}}
     for mode in modes:
         write(f"paper: {mode} ({MODES[mode]})")
         r = protocol.run_protocol(protocol_args(args, mode, shard if uses_demos[mode] else None))
@@ -233,7 +234,7 @@ def run_paper(args: argparse.Namespace) -> dict:
         results["modes"][mode] = {"method": MODES[mode], "test": r["test"], **body}
         results["methods"][mode] = body  # compare's layout: experiment replot and the curves read it
         results["baselines"] = r["baselines"]
-    protocol.write_json(out_dir / "results.json", results)
+    write_json(out_dir / "results.json", results)
     episodes_data, _ = collect_episodes(results, out_dir)  # each run's metrics.jsonl, at its run dir
     if episodes_data:
         write_episodes(episodes_data, out_dir)

@@ -89,6 +89,54 @@ def render_table(results: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def driven_rates(drivers: dict[str, dict]) -> dict[str, dict]:
+    """``results.json``'s ``baselines`` from the drivers' evaluations (``{name: {initial lane:
+    evaluation}}``): per driver and initial lane, the survival and achievement rates of its one
+    evaluation, each with the Wilson interval over its episodes."""
+    return {name: {lane: {"survival": pooled([e], "survival_rate"), "achievement": pooled([e], "achievement_rate")}
+                   for lane, e in evals.items()}
+            for name, evals in drivers.items()}
+
+
+def protocol_intro(results: dict, title: str, network: str = "", where: str = "",
+                   episodes_note: str = ", never used for any choice") -> str:
+    """The sentence above a protocol table (``title``: the road or allroads): the runs (``network``
+    says which), the test episodes (``where`` and ``episodes_note`` say whose) and how the method's
+    rates are shown."""
+    test, seeds = results["test"], len(results["methods"][results["method"]]["runs"])
+    first, count = test["episode_seed"], test["episodes_per_lane"]
+    return (f"**{title}, {results['method']}**: {network}{results['env_steps']:,} env steps per run, seeds "
+            f"{results['seeds']}, the final network of each run (no checkpoint selection). Test: {where}{count} greedy "
+            f"episodes per initial lane (episode seeds {first:,}-{first + count - 1:,}{episodes_note}), "
+            f"{test['max_steps']} steps each; the baselines drive the same episodes. Learned: mean of the per-seed rates"
+            + (f" [95 % percentile bootstrap over seeds, {RESAMPLES:,} resamples]" if seeds > 1
+               else " (one seed: no interval)") + ", then each seed's rate.")
+
+
+def rates_head(before: tuple[str, ...], after: tuple[str, ...]) -> list[str]:
+    """A protocol table's header row and rule: the ``before`` columns, the method's and the two
+    drivers' rates (``learned_cells``, ``driver_cells``), the ``after`` columns."""
+    columns = [*before, "survival", "achievement", "survival per seed", "achievement per seed",
+               "scripted driver (survival / achievement)", "human-like stand-in (survival / achievement)", *after]
+    return ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+
+
+def learned_cells(stats: list[dict]) -> list[str]:
+    """The protocol tables' cells of a method's rates, from ``across_seeds`` of survival and
+    achievement: each mean (with its interval over several seeds), then each one's per-seed rates."""
+    pct = "{:.1%}".format
+    means = [pct(st["rate"]) + (f" [{pct(st['ci95'][0])}, {pct(st['ci95'][1])}]" if st["seeds"] > 1 else "")
+             for st in stats]
+    return means + [", ".join(pct(x) for x in st["per_seed"]) for st in stats]
+
+
+def driver_cells(baselines: dict, lane: str, names: tuple[str, ...]) -> list[str]:
+    """The protocol tables' cells of the drivers ``names`` on ``lane``: survival / achievement."""
+    pct = "{:.1%}".format
+    return [f"{pct(baselines[name][lane]['survival']['rate'])} / {pct(baselines[name][lane]['achievement']['rate'])}"
+            for name in names]
+
+
 #: The stand-in's row name in results.json and the tables (it is not a person's driving).
 HUMAN_LIKE_ROW = "human-like stand-in"
 

@@ -1,0 +1,127 @@
+"""The protocol's numbers and tables: the drivers on the test episodes (``drive_baselines``, kept
+in ``baselines.json``; allroads: per road, ``road_baselines``), ``results.json`` (``summarise``, in
+``experiment compare``'s layout) and ``table.md`` (``render_table``: the test rates beside the
+drivers', then the validation table).
+
+Room: the tools (studies). May import: anything in laneshift.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+from pathlib import Path
+
+from laneshift.config import EnvConfig
+from laneshift.progress import write
+from laneshift.tools.studies import allroads
+from laneshift.tools.studies.evaluate import INITIAL_LANES, evaluate_lanes
+from laneshift.tools.studies.protocol_validation import THRESHOLDS, stability_drop, time_to_threshold, validation_table
+from laneshift.tools.studies.provenance import write_json
+from laneshift.tools.studies.table2 import (HUMAN_LIKE_ROW, across_seeds, driven_rates, driver_cells,
+                                            human_like_lanes, lane_stats, learned_cells, protocol_intro,
+                                            rates_head)
+
+#: The test episodes: episode i of each initial-lane setting is reset with seed TEST_SEED + i.
+TEST_SEED = 100_000
+#: The scripted driver's row name (``laneshift.actors.envs.demonstrator.ScriptedDriver``).
+SCRIPTED_ROW = "scripted"
+BASELINES_FILE = "baselines.json"
+
+
+def drive_baselines(env_cfg: EnvConfig, episodes: int, out_dir: Path,
+                    filename: str = BASELINES_FILE) -> dict[str, dict]:
+    """The scripted driver and the human-like stand-in on the test episodes (per initial lane), kept
+    in ``filename`` (default ``baselines.json``) and read back from there while they are of the same
+    episodes."""
+    from laneshift.actors.envs.demonstrator import ScriptedDriver
+
+    env = dataclasses.asdict(env_cfg)
+    if not env["road"]:  # the key of the files written before env.road existed, which stay valid
+        del env["road"]
+    key = json.loads(json.dumps({"env": env, "episodes": episodes, "episode_seed": TEST_SEED}))
+    path = out_dir / filename
+    if path.is_file():
+        try:
+            kept = json.loads(path.read_text())
+        except ValueError:
+            kept = {}
+        if isinstance(kept, dict) and kept.get("key") == key:
+            write(f"protocol: baselines: kept from {path}")
+            return kept["drivers"]
+        write(f"protocol: baselines: {path} is of other test episodes; driving them again")
+    label = "baseline scripted" + (f", {env_cfg.road}" if env_cfg.road else "")
+    drivers = {SCRIPTED_ROW: evaluate_lanes(ScriptedDriver, env_cfg, episodes, TEST_SEED, progress=label),
+               HUMAN_LIKE_ROW: human_like_lanes(env_cfg, episodes, TEST_SEED)}
+    write_json(path, {"key": key, "drivers": drivers})
+    return drivers
+
+
+def road_baselines(env_cfg: EnvConfig, episodes: int, out_dir: Path) -> tuple[dict[str, dict], dict[str, dict]]:
+    """allroads: the drivers on each road's test episodes (``baselines-<road>.json`` each), and
+    pooled over the four roads as :func:`drive_baselines` returns them."""
+    by_road = {road: drive_baselines(allroads.on_road(env_cfg, road), episodes, out_dir, f"baselines-{road}.json")
+               for road in allroads.ALLROADS}
+    pooled_drivers = {name: allroads.pooled_roads({road: by_road[road][name] for road in allroads.ALLROADS})
+                      for name in (SCRIPTED_ROW, HUMAN_LIKE_ROW)}
+    return pooled_drivers, by_road
+
+
+def summarise(args: argparse.Namespace, road: str, runs: list[dict], drivers: dict[str, dict],
+              drivers_by_road: dict[str, dict] | None = None) -> dict:
+    """results.json: the protocol's numbers, in ``experiment compare``'s layout (``methods``,
+    ``baselines``) plus the per-seed validation measures and the comparison with the scripted driver;
+    allroads (``drivers_by_road``): the four roads pooled there, and per road in ``roads``."""
+    method = args.method
+    body = {"runs": runs, **lane_stats(runs)}
+    per_seed = {}
+    for run in runs:
+        curve = run["validation"]["curve"]
+        per_seed[str(run["seed"])] = {
+            "reached": {f"{t:g}": time_to_threshold(curve, t) for t in THRESHOLDS},
+            "largest_drop": stability_drop(curve, args.stability_target),
+            "validation_evaluations": len(curve), "resumed": run.get("resumed", False)}
+    scripted = drivers[SCRIPTED_ROW]
+    above = {lane: {m: body[lane][m]["rate"] >= scripted[lane][f"{m}_rate"] for m in ("survival", "achievement")}
+             for lane in INITIAL_LANES}
+    validation = runs[0]["validation"] if runs else {}
+    test = {"episode_seed": TEST_SEED, "episodes_per_lane": args.test_episodes, "max_steps": args.eval_max_steps}
+    extra = {}
+    if drivers_by_road is not None:
+        test["roads"] = list(allroads.ALLROADS)
+        extra["roads"] = allroads.road_results(runs, drivers_by_road, method, SCRIPTED_ROW)
+    return {"kind": "protocol", "road": road, "scenario": args.scenario, "method": method,
+            "env_steps": args.env_steps, "seeds": [r["seed"] for r in runs],
+            "eval_episodes": args.test_episodes, "eval_max_steps": args.eval_max_steps,
+            "test": test, **extra,
+            "validation": {k: validation.get(k) for k in ("episode_seed", "every", "episodes")},
+            "stability_target": args.stability_target, "thresholds": list(THRESHOLDS),
+            "methods": {method: body},
+            "baselines": driven_rates(drivers),
+            "per_seed": per_seed, "at_or_above_scripted": above}
+
+
+def render_table(results: dict) -> str:
+    """table.md: the test rates per initial lane beside the baselines' (allroads: per road and initial
+    lane), then per seed the time to the validation thresholds and the stability figure."""
+    if "roads" in results:
+        lines = allroads.render_road_table(results, (SCRIPTED_ROW, HUMAN_LIKE_ROW))
+    else:
+        lines = rates_table(results)
+    return "\n".join(lines + validation_table(results)) + "\n"
+
+
+def rates_table(results: dict) -> list[str]:
+    """table.md's first part: the test rates per initial lane beside the baselines'."""
+    runs = results["methods"][results["method"]]["runs"]
+    lines = [protocol_intro(results, results["road"]), "",
+             *rates_head(("initial lane",), ("learned mean at/above scripted",))]
+    base = results["baselines"]
+    for lane in INITIAL_LANES:
+        cells = learned_cells([across_seeds(runs, lane, f"{m}_rate") for m in ("survival", "achievement")])
+        cells += driver_cells(base, lane, (SCRIPTED_ROW, HUMAN_LIKE_ROW))
+        above = results["at_or_above_scripted"][lane]
+        verdict = ", ".join(f"{m} {'yes' if above[m] else 'no'}" for m in ("survival", "achievement"))
+        lines.append(f"| {lane} | " + " | ".join(cells) + f" | {verdict} |")
+    return lines
