@@ -46,6 +46,19 @@ def test_time_to_threshold_and_the_largest_drop_after_the_target_on_hand_made_cu
     assert stability_drop(curve, 0.99) is None and stability_drop([], 0.5) is None
 
 
+def test_the_drop_that_evaluation_noise_alone_shows_beside_the_measured_one():
+    from laneshift.tools.studies.protocol_validation import drop_noise
+
+    curve = [{**r, "episodes": 20} for r in _curve([(100, 0.9), (200, 0.95), (300, 0.85), (400, 0.95), (500, 0.95)])]
+    noise = drop_noise(curve, 0.93)
+    # A policy at a constant 95 % measured on 20 episodes five times: a drop of 5-10 points is usual.
+    assert 0.04 <= noise["median"] <= 0.1 and noise["p90"] >= noise["median"]
+    assert stability_drop(curve, 0.93) == pytest.approx(0.1)  # the measured drop: within that noise
+    many = drop_noise([{**r, "episodes": 400} for r in curve], 0.93)
+    assert many["median"] < noise["median"] and many["p90"] < 0.05
+    assert drop_noise(curve, 0.99) is None and drop_noise([], 0.5) is None
+
+
 def test_the_validation_figure_is_the_mean_over_seeds(tmp_path):
     from laneshift.tools.studies.protocol_validation import plot_validation
 

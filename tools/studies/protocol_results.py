@@ -17,7 +17,8 @@ from laneshift.config import EnvConfig
 from laneshift.progress import write
 from laneshift.tools.studies import allroads
 from laneshift.tools.studies.evaluate import INITIAL_LANES, evaluate_lanes
-from laneshift.tools.studies.protocol_validation import THRESHOLDS, stability_drop, time_to_threshold, validation_table
+from laneshift.tools.studies.protocol_validation import (THRESHOLDS, drop_noise, stability_drop, time_to_threshold,
+                                                        validation_table)
 from laneshift.tools.studies.provenance import write_json
 from laneshift.tools.studies.table2 import (HUMAN_LIKE_ROW, across_seeds, driven_rates, driver_cells,
                                             human_like_lanes, lane_stats, learned_cells, protocol_intro,
@@ -81,6 +82,7 @@ def summarise(args: argparse.Namespace, road: str, runs: list[dict], drivers: di
         per_seed[str(run["seed"])] = {
             "reached": {f"{t:g}": time_to_threshold(curve, t) for t in THRESHOLDS},
             "largest_drop": stability_drop(curve, args.stability_target),
+            "drop_noise": drop_noise(curve, args.stability_target),
             "validation_evaluations": len(curve), "resumed": run.get("resumed", False)}
     scripted = drivers[SCRIPTED_ROW]
     above = {lane: {m: body[lane][m]["rate"] >= scripted[lane][f"{m}_rate"] for m in ("survival", "achievement")}

@@ -1,8 +1,9 @@
 """The protocol's validation during training: the greedy evaluations a run logged every
 ``--validation-every`` env steps (``validation_curve``, from ``metrics.jsonl``), the first time
 each reached an achievement level (``time_to_threshold``, ``THRESHOLDS``), its largest drop below
-its running best (``stability_drop``), and their table and figure (``validation_table``,
-``plot_validation``: ``curves_validation.png``).
+its running best (``stability_drop``) beside the drop evaluation noise alone would show
+(``drop_noise``), and their table and figure (``validation_table``, ``plot_validation``:
+``curves_validation.png``).
 
 Room: the tools (studies). May import: anything in laneshift.
 """
@@ -13,6 +14,7 @@ from pathlib import Path
 
 from laneshift.tools.studies.plots import plot_eval_curves
 from laneshift.tools.studies.runs import metrics_records
+from laneshift.tools.studies.stats import drop_noise_floor
 
 #: The validation episodes of the greedy evaluation during training (``train.validation_seed``).
 VALIDATION_SEED = 200_000
@@ -41,6 +43,19 @@ def stability_drop(curve: list[dict], target: float, key: str = "achievement_rat
         best = max(best, v)
         drop = max(drop, best - v)
     return drop
+
+
+def drop_noise(curve: list[dict], target: float, key: str = "achievement_rate") -> dict | None:
+    """The largest drop (``stability_drop``) that a policy which never changed would show on these
+    evaluations, from their few episodes alone: ``stats.drop_noise_floor`` at the run's last
+    validation rate, with its episodes per evaluation and its number of evaluations (median, 90th
+    percentile, share above 5 points). None if the run never reached ``target``. A measured drop
+    near the median says nothing about the learner; one beyond the 90th percentile does."""
+    values = [rec[key] for rec in curve if rec.get(key) is not None]
+    episodes = curve[-1].get("episodes") if curve else None
+    if not episodes or not any(v >= target for v in values):
+        return None
+    return drop_noise_floor(values[-1], int(episodes), len(values), target)
 
 
 def validation_curve(run_dir: str | Path) -> list[dict]:
@@ -76,10 +91,12 @@ def validation_table(results: dict) -> list[str]:
                  f"episodes (episode seeds from {val['episode_seed']:,}), on the training's initial-lane setting. "
                  f"First evaluation at or above each achievement level (env steps, wall-clock seconds since the "
                  f"run's first metrics record); largest drop of the validation achievement below its running "
-                 f"best after it first reached {pct(target)}, in percentage points.", "",
+                 f"best after it first reached {pct(target)}, in percentage points, beside the drop that a policy "
+                 f"which never changed shows on evaluations of this many episodes (at the seed's last validation "
+                 f"rate: the median and 90th percentile of 20,000 simulated runs).", "",
              "| seed | " + " | ".join(f"{t:.0%} validation achievement" for t in results["thresholds"])
-             + f" | largest drop after {pct(target)} | evaluations |",
-             "|---|" + "---|" * (len(results["thresholds"]) + 2)]
+             + f" | largest drop after {pct(target)} | evaluation noise alone (median / 90th pct.) | evaluations |",
+             "|---|" + "---|" * (len(results["thresholds"]) + 3)]
     for run in runs:
         s = results["per_seed"][str(run["seed"])]
         cells = []
@@ -88,8 +105,11 @@ def validation_table(results: dict) -> list[str]:
             cells.append("not reached" if hit is None else f"{hit['env_steps']:,} steps"
                          + (f", {hit['elapsed_s']:,.0f} s" if hit.get("elapsed_s") is not None else ""))
         drop = "not reached" if s["largest_drop"] is None else f"{100 * s['largest_drop']:.1f} points"
+        noise = s.get("drop_noise")
+        floor = "-" if noise is None else f"{100 * noise['median']:.1f} / {100 * noise['p90']:.1f} points"
         note = " (resumed: its seconds include the pause)" if s.get("resumed") else ""
-        lines.append(f"| {run['seed']}{note} | " + " | ".join(cells) + f" | {drop} | {s['validation_evaluations']} |")
+        lines.append(f"| {run['seed']}{note} | " + " | ".join(cells)
+                     + f" | {drop} | {floor} | {s['validation_evaluations']} |")
     return lines
 
 
