@@ -26,8 +26,8 @@ def test_derive_computes_each_target_from_the_benchmarks():
          "shards": {"rows": [_shard_row(1, 2e5), _shard_row(2, 3e5)]},
          "ingest_1024": {"rows": [_shard_row(1, 1.05e6)]}}
     t = derive(r)
-    assert t["p1_bound_env_steps_per_s"] == 150.0 * 256 / 32 == 1200.0
-    assert t["p1_fraction_of_bound"] == 0.9 and t["p1_whole_training_fraction_of_bound"] == 0.8
+    assert t["run_vs_bound_bound_env_steps_per_s"] == 150.0 * 256 / 32 == 1200.0
+    assert t["run_vs_bound_fraction_of_bound"] == 0.9 and t["run_vs_bound_whole_training_fraction_of_bound"] == 0.8
     assert t["vs_rllib_env_steps"] == 12.0 and t["vs_rllib_rss"] == 0.9
     assert t["p2_ingest_per_s_1024_per_message"] == 1.05e6
     assert t["vs_reverb_ingest"] == 20.0 and t["reverb_sample_p99_idle_ms"] == 30.0
@@ -40,7 +40,7 @@ def test_derive_leaves_null_what_did_not_run():
          "peers": {"rllib": {"skipped": "no venv"}, "reverb": {"skipped": "no venv"}},
          "shards": {"error": "x"}, "ingest_1024": {"error": "x"}}
     t = derive(r)
-    assert t["p1_fraction_of_bound"] is None and t["vs_rllib_env_steps"] is None
+    assert t["run_vs_bound_fraction_of_bound"] is None and t["vs_rllib_env_steps"] is None
     assert t["p2_ingest_per_s_1024_per_message"] is None and t["p7_shards"] == []
     assert t["vs_reverb_ingest"] is None and t["reverb_ingest_per_s"] is None
 
@@ -90,18 +90,18 @@ def test_the_waits_say_which_side_bounded_the_run():
     assert wait_shares(workers, filled)["learner_sample_wait_share"] == 0.03
 
 
-def test_derive_bounds_p1_by_the_bare_loop_before_and_after_the_run():
+def test_derive_bounds_the_run_by_the_bare_loop_before_and_after_the_run():
     r = {"learner": {"cases": [{"name": "mlp-b256", "bare": {"updates_per_s": 140.0}}]},
          "bare_after_run": {"updates_per_s": 160.0},
          "run": {"training_env_steps_per_s": 960.0, "steady_env_steps_per_s": 1080.0},
          "peers": {"rllib": {"skipped": "no venv"}, "reverb": {"skipped": "no venv"}}}
     t = derive(r)
-    assert t["p1_bound_env_steps_per_s"] == 150.0 * 256 / 32 == 1200.0 and t["p1_fraction_of_bound"] == 0.9
-    assert t["p1_bare_before_after"] == [140.0, 160.0] and t["p1_bound_resolved"] is False  # 14 % apart
+    assert t["run_vs_bound_bound_env_steps_per_s"] == 150.0 * 256 / 32 == 1200.0 and t["run_vs_bound_fraction_of_bound"] == 0.9
+    assert t["run_vs_bound_bare_before_after"] == [140.0, 160.0] and t["run_vs_bound_bound_resolved"] is False  # 14 % apart
     r["bare_after_run"] = {"updates_per_s": 150.0}
-    assert derive(r)["p1_bound_resolved"] is True  # 7 % apart: within MAX_BARE_DRIFT
+    assert derive(r)["run_vs_bound_bound_resolved"] is True  # 7 % apart: within MAX_BARE_DRIFT
     r["bare_after_run"] = {"updates_per_s": None}  # the second measurement failed: the first alone
-    assert derive(r)["p1_bound_env_steps_per_s"] == 140.0 * 8 and derive(r)["p1_bound_resolved"] is False
+    assert derive(r)["run_vs_bound_bound_env_steps_per_s"] == 140.0 * 8 and derive(r)["run_vs_bound_bound_resolved"] is False
 
 
 def test_bench_run_vs_bound_flags_rounds_whose_bound_moved_and_summarises_the_rest(monkeypatch):
@@ -118,10 +118,10 @@ def test_bench_run_vs_bound_flags_rounds_whose_bound_moved_and_summarises_the_re
     assert [row["resolved"] for row in r["rounds"]] == [True, False, True]
     # 700 / (102 x 256 / 32), 1200 / (132 x 8), 1000 / (159 x 8)
     assert [row["steady_fraction"] for row in r["rounds"]] == [0.86, 1.14, 0.79]
-    resolved = r["p1_steady_fraction_resolved"]
+    resolved = r["run_vs_bound_steady_fraction_resolved"]
     assert r["rounds_resolved"] == 2 and (resolved["min"], resolved["max"]) == (0.79, 0.86)
     assert resolved["median"] == pytest.approx(0.825)
-    assert r["p1_steady_fraction"]["max"] == 1.14  # every round is still listed
+    assert r["run_vs_bound_steady_fraction"]["max"] == 1.14  # every round is still listed
     text = run_vs_bound.render(r)
     assert "(!)" in text and "2 of 3" in text
 

@@ -1,5 +1,5 @@
 """``laneshift bench run-vs-bound``: a whole run's env steps/s against the bound its learner allows
-(the figure ``bench all`` reports as ``p1_*``; the target is at least 0.9 of the bound,
+(the figure ``bench all`` reports as ``run_vs_bound_*``; the target is at least 0.9 of the bound,
 docs/performance.md). Its old name, ``bench p1``, still runs it (hidden from the command list) and says the
 new one.
 
@@ -66,11 +66,11 @@ def bench_run_vs_bound(rounds: int = 2, env_steps: int = 40_000, ratio: float = 
             row["error"] = run.get("error") or "a bare loop measurement failed"
         rows.append(row)
     return {"train_args": args, "ratio": ratio, "batch": BATCH, "rounds": rows, "max_bare_drift": MAX_BARE_DRIFT,
-            "p1_steady_fraction": _spread(r.get("steady_fraction") for r in rows),
-            "p1_whole_fraction": _spread(r.get("whole_fraction") for r in rows),
+            "run_vs_bound_steady_fraction": _spread(r.get("steady_fraction") for r in rows),
+            "run_vs_bound_whole_fraction": _spread(r.get("whole_fraction") for r in rows),
             # Only the rounds whose bound held still (the bare loop before and after within MAX_BARE_DRIFT).
             "rounds_resolved": sum(1 for r in rows if r.get("resolved")),
-            "p1_steady_fraction_resolved": _spread(r.get("steady_fraction") for r in rows if r.get("resolved"))}
+            "run_vs_bound_steady_fraction_resolved": _spread(r.get("steady_fraction") for r in rows if r.get("resolved"))}
 
 
 def _spread(values: Any) -> dict | None:
@@ -95,9 +95,9 @@ def render(r: dict) -> str:
                      f"{row['whole_fraction']:>9} {_pct(row.get('workers_rate_limited_share')):>16} "
                      f"{_pct(row.get('learner_sample_wait_share')):>14} "
                      f"{_pct(row.get('bare_drift')) + ('' if row.get('resolved') else ' (!)'):>11}")
-    lines.append(f"  P1 (steady, last two thirds of training): {r['p1_steady_fraction']}; whole window: {r['p1_whole_fraction']}")
+    lines.append(f"  run vs bound (steady, last two thirds of training): {r['run_vs_bound_steady_fraction']}; whole window: {r['run_vs_bound_whole_fraction']}")
     lines.append(f"  rounds whose bare loop before and after agree within {r['max_bare_drift']:.0%}: {r['rounds_resolved']} "
-                 f"of {len(r['rounds'])}; P1 over them: {r['p1_steady_fraction_resolved']}"
+                 f"of {len(r['rounds'])}; run vs bound over them: {r['run_vs_bound_steady_fraction_resolved']}"
                  + ("" if r["rounds_resolved"] == len(r["rounds"]) else "  ((!): the machine's speed moved; that "
                                                                       "round's fraction says little)"))
     return "\n".join(lines)
@@ -109,7 +109,7 @@ def run_vs_bound_main(args: argparse.Namespace) -> int:
     return 0 if all("error" not in r for r in result["rounds"]) else 1
 
 
-#: The command's name before it said what it measures (``p1`` is the prefix of the figure's keys, not the measurement).
+#: The command's name before it said what it measures (``p1`` was the prefix of the figure's keys, not the measurement).
 OLD_NAME = "p1"
 
 

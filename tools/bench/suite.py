@@ -8,7 +8,7 @@ venvs exist. Then it derives the performance targets' figures from them (``targe
 prefix names its target, docs/performance.md lists where each stands):
 
 - ``p5_*``: the learner's update against a bare torch loop, updates/s (target: at least 0.9x);
-- ``p1_*``: a run's steady env steps/s against the most its learner allows (the bound: the bare
+- ``run_vs_bound_*``: a run's steady env steps/s against the most its learner allows (the bound: the bare
   loop's updates/s x batch / replay ratio; target: at least 0.9 of it);
 - ``p8_*``: a run's peak memory, the process tree's RSS and PSS (target: at most 1.2 GB RSS);
 - ``startup_first_stored_s``: seconds from the command to the first transition stored (target: at
@@ -19,7 +19,7 @@ prefix names its target, docs/performance.md lists where each stands):
 
 Nothing is estimated: a figure whose benchmark did not run is ``null`` with the reason. One thing
 is measured twice on purpose: the bare loop runs again right after the whole run
-(``bare_after_run``), and the p1 bound is the mean of the two, because this machine's speed drifts
+(``bare_after_run``), and the bound is the mean of the two, because this machine's speed drifts
 between minutes (``bench run-vs-bound`` does the same for each of its runs).
 
 Room: the tools (benchmarks). May import: the contract (``laneshift.config``); every benchmark runs as a
@@ -92,7 +92,7 @@ def _peer(name: str, venv: str, script: str, args: list[str], why_venv: str, tim
 BATCH = 256
 
 
-#: A p1 figure (a run against its learner's bound) says something only when the bare loop measured
+#: A run-vs-bound figure (a run against its learner's bound) says something only when the bare loop measured
 #: before and after its run agree within this: the target's own margin is 10 % (0.9 of the bound),
 #: and on the 2-core VM these benchmarks were written on the bare loop once measured 138.5 updates/s
 #: just before a run and 220.6 right after it (`laneshift bench run-vs-bound` shows both; docs/performance.md).
@@ -108,7 +108,7 @@ def bare_drift(before: float | None, after: float | None) -> float | None:
 
 
 def learner_bound(before: float, after: float | None, ratio: float) -> float:
-    """The p1 bound: the env steps/s a run at replay ratio ``ratio`` can make at most, from the bare
+    """The run-vs-bound bound: the env steps/s a run at replay ratio ``ratio`` can make at most, from the bare
     loop's updates/s measured before it and, if that ran, after it (their mean: the machine drifts
     between minutes), times the batch over the ratio."""
     bare = (before + after) / 2 if after else before
@@ -163,17 +163,17 @@ def derive(r: dict) -> dict:
     bound = learner_bound(bare, after, ratio=ReplayConfig().samples_per_insert) if bare else None
     drift = bare_drift(bare, after)
     ours = run.get("training_env_steps_per_s")  # the whole of training, as RLlib's figure is read
-    steady = run.get("steady_env_steps_per_s")  # its last two thirds: p1's (bench run-vs-bound repeats it in rounds)
+    steady = run.get("steady_env_steps_per_s")  # its last two thirds: run-vs-bound's (bench run-vs-bound repeats it in rounds)
     theirs = peer.get("env_steps_per_s") if isinstance(peer, dict) else None
     return {
         "p5_learner_over_bare": round(learner["learner_over_bare"], 2) if learner.get("learner_over_bare") else None,
         "p5_learner_over_bare_cpu": round(learner["learner_over_bare_cpu"], 2) if learner.get("learner_over_bare_cpu") else None,
-        "p1_env_steps_per_s": steady, "p1_bound_env_steps_per_s": round(bound, 1) if bound else None,
-        "p1_fraction_of_bound": round(steady / bound, 2) if steady and bound else None,
-        "p1_whole_training_fraction_of_bound": round(ours / bound, 2) if ours and bound else None,
+        "run_vs_bound_env_steps_per_s": steady, "run_vs_bound_bound_env_steps_per_s": round(bound, 1) if bound else None,
+        "run_vs_bound_fraction_of_bound": round(steady / bound, 2) if steady and bound else None,
+        "run_vs_bound_whole_training_fraction_of_bound": round(ours / bound, 2) if ours and bound else None,
         # The bare loop before and after the run, and whether they agree within MAX_BARE_DRIFT.
-        "p1_bare_before_after": [round(bare, 1) if bare else None, round(after, 1) if after else None],
-        "p1_bound_resolved": drift is not None and drift <= MAX_BARE_DRIFT,
+        "run_vs_bound_bare_before_after": [round(bare, 1) if bare else None, round(after, 1) if after else None],
+        "run_vs_bound_bound_resolved": drift is not None and drift <= MAX_BARE_DRIFT,
         "p8_peak_tree_rss_mb": run.get("peak_tree_rss_mb"), "p8_peak_tree_pss_mb": run.get("peak_tree_pss_mb"),
         "startup_first_stored_s": run.get("first_stored_s"),
         "vs_rllib_env_steps": round(ours / theirs, 1) if ours and theirs else None,
@@ -214,7 +214,7 @@ def bench_all(quick: bool) -> dict:
     result["ingest_1024"] = _bench("shards", ["--shards", "1", "--batch", "1024", "--duration", seconds,
                                               "--capacity", "500000" if quick else "2000000"], 900)
     result["run"] = _bench("run", ["--train-args", RUN_ARGS.format(steps=steps)], 900)
-    # The bare loop again right after the run, as `bench run-vs-bound` does: the p1 bound is the mean of the two.
+    # The bare loop again right after the run, as `bench run-vs-bound` does: the bound is the mean of the two.
     result["bare_after_run"] = {"updates_per_s": bare_updates_per_s(float(seconds))}
     result["peers"] = {"rllib": _rllib(steps // 2, 1800),
                        "reverb": _reverb(seconds, "100000" if quick else "400000", 900)}
