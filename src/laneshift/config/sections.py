@@ -292,7 +292,7 @@ class LearnerConfig:
     # pixels repeated), a fresh shift per row. none = off; vector observations are never augmented.
     augment: Literal["none", "shift"] = "none"
     # The learner's convolutions in bfloat16 (autocast; the parameters, the layers after the
-    # convolutions and the loss stay float32): 1.3-1.6x the SmallCNN updates/s at batch 32 on the
+    # convolutions and the loss stay float32): 1.57x the SmallCNN updates/s at batch 32 on the
     # dev machine's AMD EPYC, which has avx512_bf16 (`laneshift bench learner --cases small-b32,small-b32-bf16`).
     # A CPU without bfloat16 instructions emulates them, slower than fp32. Acting stays float32.
     cnn_precision: Literal["fp32", "bf16"] = "fp32"
