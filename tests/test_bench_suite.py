@@ -29,10 +29,10 @@ def test_derive_computes_each_target_from_the_benchmarks():
     assert t["run_vs_bound_bound_env_steps_per_s"] == 150.0 * 256 / 32 == 1200.0
     assert t["run_vs_bound_fraction_of_bound"] == 0.9 and t["run_vs_bound_whole_training_fraction_of_bound"] == 0.8
     assert t["vs_rllib_env_steps"] == 12.0 and t["vs_rllib_rss"] == 0.9
-    assert t["p2_ingest_per_s_1024_per_message"] == 1.05e6
+    assert t["ingest_per_s_1024_per_message"] == 1.05e6
     assert t["vs_reverb_ingest"] == 20.0 and t["reverb_sample_p99_idle_ms"] == 30.0
-    assert [row["shards"] for row in t["p7_shards"]] == [1, 2]
-    assert t["p7_shards"][0]["sample_p99_idle_ms"] == 4.0
+    assert [row["shards"] for row in t["ingest_by_shard_count"]] == [1, 2]
+    assert t["ingest_by_shard_count"][0]["sample_p99_idle_ms"] == 4.0
 
 
 def test_derive_leaves_null_what_did_not_run():
@@ -41,7 +41,7 @@ def test_derive_leaves_null_what_did_not_run():
          "shards": {"error": "x"}, "ingest_1024": {"error": "x"}}
     t = derive(r)
     assert t["run_vs_bound_fraction_of_bound"] is None and t["vs_rllib_env_steps"] is None
-    assert t["p2_ingest_per_s_1024_per_message"] is None and t["p7_shards"] == []
+    assert t["ingest_per_s_1024_per_message"] is None and t["ingest_by_shard_count"] == []
     assert t["vs_reverb_ingest"] is None and t["reverb_ingest_per_s"] is None
 
 

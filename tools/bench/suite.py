@@ -4,16 +4,16 @@ What it is: runs ``laneshift bench env | replay | learner | worker | shards | ru
 as its own process with ``--json`` (so one's memory or threads cannot colour the next), and the
 RLlib peer (``tools/bench/scripts/rllib_dqn.py`` in ``.venv-rllib``, built by ``make bench-rllib``) and the
 Reverb peer (``tools/bench/scripts/reverb_replay.py`` in ``.venv-reverb``, ``make bench-reverb``) when their
-venvs exist. Then it derives the performance targets' figures from them (``targets``; each key's
-prefix names its target, docs/performance.md lists where each stands):
+venvs exist. Then it derives the performance targets' figures from them (``targets``;
+docs/performance.md lists where each stands):
 
-- ``p5_*``: the learner's update against a bare torch loop, updates/s (target: at least 0.9x);
+- ``learner_over_bare*``: the learner's update against a bare torch loop, updates/s (target: at least 0.9x);
 - ``run_vs_bound_*``: a run's steady env steps/s against the most its learner allows (the bound: the bare
   loop's updates/s x batch / replay ratio; target: at least 0.9 of it);
-- ``p8_*``: a run's peak memory, the process tree's RSS and PSS (target: at most 1.2 GB RSS);
+- ``run_peak_tree_*``: a run's peak memory, the process tree's RSS and PSS (target: at most 1.2 GB RSS);
 - ``startup_first_stored_s``: seconds from the command to the first transition stored (target: at
   most 5 s);
-- ``p2_*``: replay ingest, transitions/s (target: 1M/s); ``p7_shards``: ingest and sample latency
+- ``ingest_per_s_1024_per_message``: replay ingest, transitions/s (target: 1M/s); ``ingest_by_shard_count``: ingest and sample latency
   by replay shard count (docs/scaling.md);
 - ``vs_rllib_*``, ``vs_reverb_*``, ``reverb_*``: laneshift against RLlib's DQN and Reverb.
 
@@ -166,32 +166,33 @@ def derive(r: dict) -> dict:
     steady = run.get("steady_env_steps_per_s")  # its last two thirds: run-vs-bound's (bench run-vs-bound repeats it in rounds)
     theirs = peer.get("env_steps_per_s") if isinstance(peer, dict) else None
     return {
-        "p5_learner_over_bare": round(learner["learner_over_bare"], 2) if learner.get("learner_over_bare") else None,
-        "p5_learner_over_bare_cpu": round(learner["learner_over_bare_cpu"], 2) if learner.get("learner_over_bare_cpu") else None,
+        "learner_over_bare": round(learner["learner_over_bare"], 2) if learner.get("learner_over_bare") else None,
+        "learner_over_bare_cpu": round(learner["learner_over_bare_cpu"], 2) if learner.get("learner_over_bare_cpu") else None,
         "run_vs_bound_env_steps_per_s": steady, "run_vs_bound_bound_env_steps_per_s": round(bound, 1) if bound else None,
         "run_vs_bound_fraction_of_bound": round(steady / bound, 2) if steady and bound else None,
         "run_vs_bound_whole_training_fraction_of_bound": round(ours / bound, 2) if ours and bound else None,
         # The bare loop before and after the run, and whether they agree within MAX_BARE_DRIFT.
         "run_vs_bound_bare_before_after": [round(bare, 1) if bare else None, round(after, 1) if after else None],
         "run_vs_bound_bound_resolved": drift is not None and drift <= MAX_BARE_DRIFT,
-        "p8_peak_tree_rss_mb": run.get("peak_tree_rss_mb"), "p8_peak_tree_pss_mb": run.get("peak_tree_pss_mb"),
+        "run_peak_tree_rss_mb": run.get("peak_tree_rss_mb"), "run_peak_tree_pss_mb": run.get("peak_tree_pss_mb"),
         "startup_first_stored_s": run.get("first_stored_s"),
         "vs_rllib_env_steps": round(ours / theirs, 1) if ours and theirs else None,
         "vs_rllib_rss": round(run["peak_tree_rss_mb"] / peer["peak_tree_rss_mb"], 2)
         if run.get("peak_tree_rss_mb") and isinstance(peer, dict) and peer.get("peak_tree_rss_mb") else None,
-        "p2_ingest_per_s_1024_per_message": (_get(r, "ingest_1024", "rows") or [{}])[0].get("ingest_per_s"),
+        "ingest_per_s_1024_per_message": (_get(r, "ingest_1024", "rows") or [{}])[0].get("ingest_per_s"),
         # The replay peer, under the load of the p7 row with one shard.
         "vs_reverb_ingest": _ratio(_get(r, "shards", "rows"), _get(r, "peers", "reverb", "ingest_per_s")),
         "reverb_ingest_per_s": _get(r, "peers", "reverb", "ingest_per_s"),
         "reverb_sample_p99_idle_ms": _get(r, "peers", "reverb", "sample_idle", "p99_ms"),
         # Ingest and sample latency by shard count (docs/scaling.md).
-        "p7_shards": [{k: row.get(k) for k in ("shards", "ingest_per_s", "server_cpu_us_per_transition")}
-                      | {"sample_p99_idle_ms": _get(row, "sample_idle", "p99_ms"),
-                         "sample_p99_under_ingest_ms": _get(row, "sample_under_ingest", "p99_ms"),
-                         # A zero-work queryable's p99 beside it: what the transport and machine leave.
-                         "floor_p99_idle_ms": _get(row, "floor_idle", "p99_ms"),
-                         "floor_p99_under_ingest_ms": _get(row, "floor_under_ingest", "p99_ms")}
-                      for row in _get(r, "shards", "rows") or []],
+        "ingest_by_shard_count": [
+            {k: row.get(k) for k in ("shards", "ingest_per_s", "server_cpu_us_per_transition")}
+            | {"sample_p99_idle_ms": _get(row, "sample_idle", "p99_ms"),
+               "sample_p99_under_ingest_ms": _get(row, "sample_under_ingest", "p99_ms"),
+               # A zero-work queryable's p99 beside it: what the transport and machine leave.
+               "floor_p99_idle_ms": _get(row, "floor_idle", "p99_ms"),
+               "floor_p99_under_ingest_ms": _get(row, "floor_under_ingest", "p99_ms")}
+            for row in _get(r, "shards", "rows") or []],
     }
 
 
