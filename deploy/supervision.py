@@ -332,10 +332,9 @@ class Run:
                 self._say(f"train: learner did not stop cleanly: {_cause(exc)}")
         finals = []
         for name in (n for n in self.builder.replay_servers if n in self.handles):
-            try:
-                finals.append(ray.get(self.handles[name].stop.remote(), timeout=graceful_s))
-            except ray.exceptions.RayError as exc:
-                self._say(f"train: {name} did not stop cleanly: {_cause(exc)}")
+            final = self._stop_replay_server(name, graceful_s)
+            if final is not None:
+                finals.append(final)
         if finals:  # the run's replay as one (a sharded replay: every shard's counters summed)
             from laneshift.replay_stats import merge_replay_stats
 
@@ -346,6 +345,30 @@ class Run:
             except ray.exceptions.RayError:
                 pass
         self.close_router()
+
+    def _stop_replay_server(self, name: str, graceful_s: float) -> dict | None:
+        """Stop one replay server and return its final stats. A server that dies while the run
+        stops (a kill in the last moments, after ``_sweep_services`` looked) is waited for as in the
+        run: Ray restarts it from its write-ahead log and checkpoint, the death is counted, and the
+        new process is stopped instead, so its stats and final checkpoint are not lost with it."""
+        import ray
+
+        for attempt in (1, 2):
+            try:
+                return ray.get(self.handles[name].stop.remote(), timeout=graceful_s)
+            except ray.exceptions.RayActorError as exc:  # died or restarting
+                if attempt == 1:
+                    try:
+                        self._restart(name, exc)
+                        continue
+                    except LaunchError as gone:
+                        self._say(f"train: {name} did not stop cleanly: {gone}")
+                        return None
+                self._say(f"train: {name} did not stop cleanly: {_cause(exc)}")
+            except ray.exceptions.RayError as exc:
+                self._say(f"train: {name} did not stop cleanly: {_cause(exc)}")
+            return None
+        return None
 
     def close_router(self) -> None:
         """The router session in this process, if it holds one (``deploy.router_in``), last of all."""

@@ -94,8 +94,11 @@ def test_router_killed_comes_back_on_the_same_endpoint(tmp_path):
 def test_replay_server_without_its_log_killed_before_its_first_checkpoint_counts_every_loss(tmp_path):
     """replay.wal off and no checkpoint to restore: what it had stored is lost, and counted (it
     used to read 0 lost). The workers send again the batches they had not seen acknowledged; the
-    ones they had are gone, each counted whole (made == stored + lost is checked by run_with_fault)."""
-    run_dir, summary, replay, text = run_with_fault(tmp_path, "replay-server", at_steps=1500,
+    ones they had are gone, each counted whole (made == stored + lost is checked by run_with_fault).
+    The kill comes at half the budget, after each worker's first acknowledgement (it asks every
+    ACK_EVERY = 16 batches of 50 items, 800 of its env steps): before it, every batch is still in the
+    workers' hands and a fast machine's run loses nothing, which is not what this test is about."""
+    run_dir, summary, replay, text = run_with_fault(tmp_path, "replay-server", at_steps=3000,
                                                     **{"replay.checkpoint_every_s": 0, "replay.wal": "off"})
     lost = summary["replay"]
     assert lost["lost_items"] > 0 and lost["lost_items"] == lost["lost_batches"] * FAST["actor.send_every"], lost
