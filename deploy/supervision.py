@@ -353,22 +353,22 @@ class Run:
         new process is stopped instead, so its stats and final checkpoint are not lost with it."""
         import ray
 
-        for attempt in (1, 2):
+        try:
+            return ray.get(self.handles[name].stop.remote(), timeout=graceful_s)
+        except ray.exceptions.RayActorError as exc:  # died or restarting: wait for the new process
             try:
-                return ray.get(self.handles[name].stop.remote(), timeout=graceful_s)
-            except ray.exceptions.RayActorError as exc:  # died or restarting
-                if attempt == 1:
-                    try:
-                        self._restart(name, exc)
-                        continue
-                    except LaunchError as gone:
-                        self._say(f"train: {name} did not stop cleanly: {gone}")
-                        return None
-                self._say(f"train: {name} did not stop cleanly: {_cause(exc)}")
-            except ray.exceptions.RayError as exc:
-                self._say(f"train: {name} did not stop cleanly: {_cause(exc)}")
+                self._restart(name, exc)
+            except LaunchError as gone:
+                self._say(f"train: {name} did not stop cleanly: {gone}")
+                return None
+        except ray.exceptions.RayError as exc:
+            self._say(f"train: {name} did not stop cleanly: {_cause(exc)}")
             return None
-        return None
+        try:
+            return ray.get(self.handles[name].stop.remote(), timeout=graceful_s)
+        except ray.exceptions.RayError as exc:
+            self._say(f"train: {name} did not stop cleanly: {_cause(exc)}")
+            return None
 
     def close_router(self) -> None:
         """The router session in this process, if it holds one (``deploy.router_in``), last of all."""
