@@ -19,7 +19,7 @@ import zenoh
 
 from laneshift import transport, wire
 
-from .seams import Delivery, WeightsUpdate
+from .seams import Delivery, WeightsUpdate, weights_update
 
 
 #: Batches a worker may have sent that the replay server has not stored yet, and how often
@@ -198,7 +198,7 @@ class ZenohActorLinks:
         self._episodes.put(wire.encode_episode(record))
 
     def latest_weights(self) -> WeightsUpdate:
-        return _weights_update(self._weights.take())
+        return weights_update(self._weights.take())
 
     def wait_weights(self, timeout: float) -> WeightsUpdate:
         data = pushed = self._weights.wait(timeout)
@@ -214,7 +214,7 @@ class ZenohActorLinks:
             # Still waiting (sync mode: for the round its last batch is part of). If that batch
             # was lost on the way, the round waits for it: ask what the server lacks, send it again.
             self.acknowledge(idle_s=RESEND_AFTER_S)
-        return _weights_update(data)
+        return weights_update(data)
 
     def wait_insert_ok(self) -> None:
         """Block while the replay server says the learner is too far behind (rate limiter)."""
@@ -241,13 +241,3 @@ class ZenohActorLinks:
         self._weights.close()
         self._stop.close()
         self._flow.close()
-
-
-def _weights_update(data: bytes | None) -> WeightsUpdate:
-    """A WEIGHTS message decoded; the WireError of one that cannot be read (the worker counts it)."""
-    if data is None:
-        return None
-    try:
-        return wire.decode_weights(data)
-    except wire.WireError as exc:
-        return exc

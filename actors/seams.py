@@ -1,5 +1,6 @@
 """The env worker's seams (Acme style): what the same ``EnvWorker`` needs from the world, over
-zenoh or in-process alike. Types only; the zenoh adapter is in ``links``, the in-process one in
+zenoh or in-process alike. Types, and the one weights decoding both adapters share
+(``weights_update``); the zenoh adapter is in ``links``, the in-process one in
 ``laneshift.deploy.inprocess``, and the links own the encoding: every value crossing a seam is
 typed, never the wire's bytes.
 
@@ -31,6 +32,16 @@ from laneshift import wire
 
 #: What a weights seam returns: new weights, a message that could not be read, or nothing new.
 WeightsUpdate: TypeAlias = wire.Weights | wire.WireError | None
+
+
+def weights_update(data: bytes | None) -> WeightsUpdate:
+    """A WEIGHTS message decoded; the WireError of one that cannot be read (the worker counts it)."""
+    if data is None:
+        return None
+    try:
+        return wire.decode_weights(data)
+    except wire.WireError as exc:
+        return exc
 
 
 @dataclass(frozen=True)

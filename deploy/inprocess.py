@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from laneshift import wire
-from laneshift.actors.seams import Delivery, WeightsUpdate
+from laneshift.actors.seams import Delivery, WeightsUpdate, weights_update
 from laneshift.config import RunConfig
 from laneshift.learner.episodes import read_record
 from laneshift.learner.seams import EpisodeUpdate, PendingSample, ReplayThrough
@@ -70,10 +70,7 @@ class InProcessActorLinks:
             if not self.board.weights or self.board.weights is self._seen:
                 return None
             self._seen = self.board.weights
-        try:
-            return wire.decode_weights(self._seen)  # each worker decodes, as over zenoh
-        except wire.WireError as exc:
-            return exc
+        return weights_update(self._seen)  # each worker decodes, as over zenoh
 
     def wait_weights(self, timeout: float) -> WeightsUpdate:
         with self.board.cond:
