@@ -46,7 +46,7 @@ PACKAGE_DIRS = {"laneshift": "src/laneshift", "laneshift.actors": "actors", "lan
 PACKAGE_ORDER = {
     "laneshift.wire": ("errors", "keys", "envelope", "batches", "fastpath", "transitions", "sampling", "weights",
                        "json_messages"),
-    "laneshift.config": ("sections", "loading", "methods"),
+    "laneshift.config": ("checks", "sections", "run", "loading", "methods"),
 }
 CONTRACT = {"laneshift", *PACKAGE_ORDER, *(f"{p}.{m}" for p, order in PACKAGE_ORDER.items() for m in order),
             "laneshift.transport", "laneshift.envspec",

@@ -16,7 +16,9 @@ A bad value is refused with a ``ConfigError`` naming the field, e.g.
 
 One module per concern, each importing only those above it in this list (no circle):
 
-- ``sections``: the section dataclasses, their checks, ``RunConfig``, ``ConfigError``, ``NAME``;
+- ``checks``: ``ConfigError``, ``NAME`` and the checks every section runs;
+- ``sections``: the components' sections (``env``, ``actor``, ``replay``, ``learner``);
+- ``run``: how a run is wired (``transport``, ``train``, ``deploy``) and ``RunConfig``, grouping them all;
 - ``loading``: files and ``section.field`` overrides coerced into a ``RunConfig``, and saving one;
 - ``methods``: the method presets (``--method``), overrides on top of a run's config.
 
@@ -30,9 +32,10 @@ from __future__ import annotations
 
 from .loading import build_section, load_run_config, read_config_file, save_run_config
 from .methods import METHODS, method_settings
-from .sections import (AUTO_EVAL_FROM, DEMO_MODES, NAME, SCENARIO_NAMES, SECTIONS, ActorConfig, ConfigError, DeployConfig, EnvConfig,
-                       LearnerConfig, ReplayConfig, RunConfig, TrainConfig, TransportConfig, worker_budgets,
-                       worker_names)
+from .checks import NAME, ConfigError
+from .run import (AUTO_EVAL_FROM, SECTIONS, DeployConfig, RunConfig, TrainConfig, TransportConfig, worker_budgets,
+                  worker_names)
+from .sections import DEMO_MODES, SCENARIO_NAMES, ActorConfig, EnvConfig, LearnerConfig, ReplayConfig
 
 __all__ = ["AUTO_EVAL_FROM", "DEMO_MODES", "METHODS", "NAME", "SCENARIO_NAMES", "SECTIONS", "ActorConfig", "ConfigError", "DeployConfig",
            "EnvConfig", "LearnerConfig", "ReplayConfig", "RunConfig", "TrainConfig", "TransportConfig",

@@ -3,7 +3,7 @@ section, and ``section.field`` overrides (``--set``, strings from the command li
 coerced to its field's type by ``_coerce``; and saving one (a run directory's ``config.yaml``).
 
 Room: the contract (shared by every process). May import: the standard library, PyYAML and
-``.sections``.
+``.checks`` and ``.run``.
 """
 
 from __future__ import annotations
@@ -17,7 +17,8 @@ from typing import Any, Literal, Mapping
 
 import yaml
 
-from .sections import SECTIONS, ConfigError, RunConfig
+from .checks import ConfigError
+from .run import SECTIONS, RunConfig
 
 
 def _coerce(where: str, typ: Any, value: Any) -> Any:

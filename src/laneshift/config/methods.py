@@ -2,7 +2,7 @@
 ``laneshift experiment compare --methods`` (docs/RESULTS.md measures them), each a map of
 ``section.field`` overrides applied on top of the run's config (the user's ``--set`` values win).
 
-Room: the contract (shared by every process). May import: the standard library and ``.sections``
+Room: the contract (shared by every process). May import: the standard library and ``.checks``
 (``ConfigError``).
 """
 
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from .sections import ConfigError
+from .checks import ConfigError
 
 # DQfD (Hester et al. 2018): pre-training on demos (20,000 updates), demos kept in the buffer
 # (30 % of 300,000 items, i.e. about 300 scripted episodes), large-margin loss on demo rows,
