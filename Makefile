@@ -53,8 +53,10 @@ $(RLLIB_STAMP): pyproject.toml
 	$(RLLIB_PY) deploy/install_torch.py -q
 	$(RLLIB_PY) -m pip install --disable-pip-version-check -q "ray[rllib]==2.60.0" torch==2.13.0
 	# The env's own deps under RLlib's gymnasium 1.2.2 (highway-env accepts >=1.0; it brings pygame-ce),
-	# then laneshift itself without its deps (no zenoh, no gymnasium 1.4.0).
-	$(RLLIB_PY) -m pip install --disable-pip-version-check -q highway-env==1.12.1 gymnasium==1.2.2 torch==2.13.0
+	# and tqdm for laneshift's evaluation code (--eval-every), then laneshift itself without its deps
+	# (no zenoh, no gymnasium 1.4.0).
+	$(RLLIB_PY) -m pip install --disable-pip-version-check -q highway-env==1.12.1 gymnasium==1.2.2 torch==2.13.0 \
+		"tqdm>=4.66"
 	$(RLLIB_PY) -m pip install --disable-pip-version-check -q --no-deps -e .
 	@$(RLLIB_PY) deploy/install_torch.py --check
 	@touch $(RLLIB_STAMP)

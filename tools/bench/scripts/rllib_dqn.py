@@ -22,6 +22,7 @@ its own venv, ``.venv-rllib`` (laneshift installed there with ``--no-deps -e .``
 How to run it (``make bench-rllib`` creates .venv-rllib if missing and runs this):
 
     make bench-rllib                                    # 20,000 env steps, ratio 32
+    make bench-rllib RLLIB_ARGS="--env-steps 100000 --eval-every 20000 --eval-episodes 20"   # a learning curve
     make bench-rllib RLLIB_ARGS="--env-steps 3000 --ratio 8"
     .venv-rllib/bin/python tools/bench/scripts/rllib_dqn.py --env-steps 20000 --ratio 128
 
@@ -161,6 +162,27 @@ def q_net_layers(algo) -> tuple[list[int], int]:
     return sizes, params
 
 
+def greedy_rates(algo, episodes: int, seed: int) -> dict:
+    """The learner's Q-network, greedy, on laneshift's evaluation episodes from both initial-lane
+    settings (``laneshift.actors.evaluation``, the code every laneshift evaluation uses)."""
+    import torch
+
+    from laneshift.actors.evaluation import evaluate_lanes
+    from laneshift.config import EnvConfig
+
+    module = algo.learner_group._learner.module["default_policy"]
+
+    def greedy(obs) -> int:
+        with torch.no_grad():
+            batch = {"obs": torch.as_tensor(obs, dtype=torch.float32).unsqueeze(0)}
+            return int(module.forward_inference(batch)["actions"][0])
+
+    env_cfg = EnvConfig(scenario=SCENARIO, observation=ENV_KWARGS["observation"],
+                        reward_preset=ENV_KWARGS["reward_preset"], initial_lane=ENV_KWARGS["initial_lane"])
+    rates = evaluate_lanes(lambda _env: greedy, env_cfg, episodes, seed)
+    return {lane: {k: r[k] for k in ("survival_rate", "achievement_rate") if k in r} for lane, r in rates.items()}
+
+
 def _dig(d: dict, *path, default=None):
     for k in path:
         if not isinstance(d, dict) or k not in d:
@@ -181,6 +203,12 @@ def main(argv: list[str] | None = None) -> int:
                     help="RLlib min_sample_timesteps_per_iteration (results are reduced once per iteration)")
     ap.add_argument("--torch-threads", type=int, default=1, help="torch threads of the learner (laneshift: 1)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--eval-every", type=int, default=0,
+                    help="greedy evaluation of the learner's network every this many env steps (0 = none); "
+                         "its time is left out of the training clock")
+    ap.add_argument("--eval-episodes", type=int, default=20, help="episodes per initial lane of each evaluation")
+    ap.add_argument("--eval-seed", type=int, default=200_000,
+                    help="first episode seed of the evaluations (laneshift's validation episodes)")
     args = ap.parse_args(argv)
 
     logging.basicConfig(stream=sys.stderr, level=logging.WARNING)
@@ -231,15 +259,24 @@ def main(argv: list[str] | None = None) -> int:
         print(f"rllib_dqn: set up in {setup_s:.1f} s; Q-net {layers}, {params} params; "
               f"training {args.env_steps} env steps at ratio {args.ratio:g}", file=sys.stderr)
         env_steps, result, iters = 0, {}, 0
+        curve: list[dict] = []
+        eval_s = 0.0  # evaluation time, left out of every training clock below
         start = time.monotonic()
         while env_steps < args.env_steps:
             result = algo.train()
             iters += 1
             env_steps = int(_dig(result, "env_runners", "num_env_steps_sampled_lifetime", default=0))
+            train_s = time.monotonic() - start - eval_s
             print(f"rllib_dqn: iter {iters} env steps {env_steps} updates {updates[0]} "
-                  f"{env_steps / (time.monotonic() - start):.0f} steps/s "
+                  f"{env_steps / train_s:.0f} steps/s "
                   f"return {_dig(result, 'env_runners', 'episode_return_mean')}", file=sys.stderr)
-        wall = time.monotonic() - start
+            if args.eval_every and env_steps >= (len(curve) + 1) * args.eval_every:
+                e0 = time.monotonic()
+                curve.append({"env_steps": env_steps, "train_s": round(train_s, 1), "updates": updates[0],
+                              **greedy_rates(algo, args.eval_episodes, args.eval_seed)})
+                eval_s += time.monotonic() - e0
+                print(f"rllib_dqn: evaluation at {env_steps} env steps: {json.dumps(curve[-1])}", file=sys.stderr)
+        wall = time.monotonic() - start - eval_s
         readback = config_readback(algo)
         rows_trained = _dig(result, "learners", "default_policy", "num_module_steps_trained_lifetime")
         algo.stop()
@@ -276,6 +313,7 @@ def main(argv: list[str] | None = None) -> int:
         "q_net_params": params,
         "versions": {"ray": ray.__version__, "rllib": ray.__version__, "torch": torch.__version__,
                      "gymnasium": gymnasium.__version__, "python": sys.version.split()[0]},
+        "curve": curve,  # greedy evaluations (--eval-every): survival and achievement per initial lane
         "args": vars(args),
         "derived": derived,
         "config": readback,
