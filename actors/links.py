@@ -76,14 +76,14 @@ class ZenohActorLinks:
         self._progress = (-1, time.monotonic(), RESEND_AFTER_S)  # (its next_seq, since when, resend after)
         self.resent = 0  # batches sent again (counted; the server ignores those it has)
         # A wait on the network says so in the worker's log: one line after a few seconds, then at
-        # most one every 30 s, and one when it is over (transport.WaitLines).
+        # most one every 30 s, and one when it is over (transport.WaitReporter).
         router = transport.router_of(session)
-        self._weights_wait = transport.WaitLines(
+        self._weights_wait = transport.WaitReporter(
             name, f"the learner's weights on {wire.weights_key(run_id)} (router {router})", "got the learner's weights")
-        self._flow_wait = transport.WaitLines(
+        self._flow_wait = transport.WaitReporter(
             name, f"the replay server to allow inserts on {wire.replay_flow_key(replay)} (rate limiter; "
                   f"router {router})", "the replay server allows inserts again")
-        self._replay_wait = transport.WaitLines(
+        self._replay_wait = transport.WaitReporter(
             name, f"the replay server on {wire.replay_control_key(replay)} (router {router})",
             f"the replay server answered on {wire.replay_control_key(replay)}")
 

@@ -27,7 +27,7 @@ from laneshift import wire
 from laneshift.actors.seams import Delivery, WeightsUpdate, weights_update
 from laneshift.config import RunConfig
 from laneshift.learner.episodes import read_record
-from laneshift.learner.seams import EpisodeUpdate, PendingSample, ReplayThrough
+from laneshift.learner.seams import EpisodeUpdate, PendingSample, ReplayForwarding
 from laneshift.learner.shards import replay_over
 
 if TYPE_CHECKING:
@@ -114,7 +114,7 @@ class InProcessReplay:
         return bool(reply and reply.get("ok"))
 
 
-class InProcessLearnerLinks(ReplayThrough):
+class InProcessLearnerLinks(ReplayForwarding):
     """The learner's ``LearnerLinks`` on the board: weights and stats encoded, episodes decoded."""
 
     def __init__(self, board: Board, schema: wire.TransitionSchema, beta: float = 0.4, seed: int = 0):

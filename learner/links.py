@@ -25,7 +25,7 @@ from laneshift import transport, wire
 from laneshift.config import RunConfig
 
 from .episodes import read_record
-from .seams import EpisodeUpdate, PendingSample, ReplayClient, ReplayThrough
+from .seams import EpisodeUpdate, PendingSample, ReplayClient, ReplayForwarding
 from .shards import replay_over
 
 if TYPE_CHECKING:
@@ -45,7 +45,7 @@ class ZenohReplayShard:
         self._ask_sample = transport.Requester(session, wire.sample_key(namespace), timeout_s)
         # No answer from the replay server (not started yet, restarting, another run_id) is said in
         # one line after a few seconds, every 30 s while it lasts, and once when it answers.
-        self.replay_wait = transport.WaitLines(
+        self.replay_wait = transport.WaitReporter(
             "learner", f"the replay server on {wire.sample_key(namespace)} (router {router})",
             f"the replay server answered on {wire.sample_key(namespace)} (router {router})")
 
@@ -86,7 +86,7 @@ class ZenohReplayShard:
         self._priorities.put(wire.encode_priorities(update))  # the one place a priority update is encoded
 
 
-class ZenohLearnerLinks(ReplayThrough):
+class ZenohLearnerLinks(ReplayForwarding):
     """LearnerLinks over zenoh: queries to the replay server (or, with ``replay.shards`` > 1, to
     every shard through ``ShardedReplay``), weights published with BLOCK."""
 

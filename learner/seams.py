@@ -17,7 +17,7 @@ typed; the adapters own the encoding (the wire's bytes never reach the learner's
   learner counts), ``publish_stats(LearnerStatus, final)`` (``status.LearnerStatus``; the adapter
   sends ``to_dict()`` as JSON, with ``"done": true`` on the final one), ``stop_requested()``,
   ``stop_all()``;
-- ``LearnerLinks``: all three as one object; ``ReplayThrough``: the ``ReplayClient`` half of a
+- ``LearnerLinks``: all three as one object; ``ReplayForwarding``: the ``ReplayClient`` half of a
   LearnerLinks, forwarded to its ``replay``.
 
 Room: learner (component). May import: the contract and, for its type, ``status``; never another
@@ -77,7 +77,7 @@ class LearnerLinks(ReplayClient, WeightsPublisher, RunChannel, Protocol):
     """All three seams, as one object (what the builder hands the learner)."""
 
 
-class ReplayThrough:
+class ReplayForwarding:
     """The ``ReplayClient`` half of a LearnerLinks, handed on to ``self.replay``: one replay
     server's client, or ``ShardedReplay`` over one per shard (zenoh and in-process links alike)."""
 

@@ -165,7 +165,7 @@ def open_session(cfg: TransportConfig, mode: str = "client", max_message_bytes: 
     if mode != "client":
         return zenoh.open(conf)  # a router only binds its port: nothing to wait for
     bound = f", giving up after {connect_timeout_s:g} s" if connect_timeout_s is not None else ""
-    lines = WaitLines(who or "laneshift", f"the zenoh router at {cfg.router} (transport.router{bound})",
+    lines = WaitReporter(who or "laneshift", f"the zenoh router at {cfg.router} (transport.router{bound})",
                       f"connected to the zenoh router at {cfg.router}", quiet=quiet)
     # zenoh.open blocks until a router answers (or its own connect timeout): it runs in a helper
     # thread so this one can report the wait and see ``stop``.
@@ -220,7 +220,7 @@ def router_of(session: zenoh.Session) -> str:
 
 # --------------------------------------------------------------------------- waiting lines
 # Every network wait says what it waits for (a peer not started, another run id, a router out of
-# reach), so a process that is waiting is never silent (tests/test_waiting_lines.py).
+# reach), so a process that is waiting is never silent (tests/test_wait_reporter.py).
 
 #: A network wait this long says so in one line; that line repeats at most every WAIT_LINE_EVERY_S.
 WAIT_FIRST_LINE_S = 5.0
@@ -233,7 +233,7 @@ def _say(line: str) -> None:
     print(line, file=sys.stderr, flush=True)
 
 
-class WaitLines:
+class WaitReporter:
     """The lines of one network wait: what a process is waiting for, said once it waited
     ``first_after_s``, again at most every ``every_s`` with the time waited (also across waits, so
     a wait that comes and goes prints no more), and once when it is over if anything was said.
@@ -242,7 +242,7 @@ class WaitLines:
     ``clock`` and ``emit`` are for tests (a fake clock, a list's append).
 
         >>> out = []; t = [0.0]
-        >>> w = WaitLines("w0", "the learner's weights on laneshift/run/weights", "got weights",
+        >>> w = WaitReporter("w0", "the learner's weights on laneshift/run/weights", "got weights",
         ...               clock=lambda: t[0], emit=out.append)
         >>> for t[0] in (0, 2, 4, 6, 8): w.missed()
         >>> t[0] = 9.5; w.answered(); out
@@ -284,7 +284,7 @@ class WaitLines:
         self.since, self._told = None, False
 
 
-def wait_with_lines(lines: WaitLines, ready: Callable[[float], bool], timeout_s: float | None = None,
+def wait_with_lines(lines: WaitReporter, ready: Callable[[float], bool], timeout_s: float | None = None,
                     stop: threading.Event | None = None, tick_s: float = 1.0) -> bool:
     """Wait until ``ready(t)`` (which itself waits up to ``t`` s, e.g. ``Event.wait``) is True,
     reporting through ``lines``; False when ``timeout_s`` passed or ``stop`` was set first.

@@ -29,7 +29,7 @@ class TransportConfig:
     # (RunConfig.max_message_bytes): twice its largest message (a sample reply), at least 16 MiB.
     max_message_mb: float = 0.0
     # How long a process waits for its router before it gives up with one line naming it
-    # (0 = forever: services may start before the router, and WaitLines says what they wait for).
+    # (0 = forever: services may start before the router, and WaitReporter says what they wait for).
     connect_timeout_s: float = 0.0
 
     def __post_init__(self) -> None:

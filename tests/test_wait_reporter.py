@@ -1,7 +1,7 @@
 """Every network wait says what it waits for, so a waiting process is never silent: one line
 after a few seconds naming the endpoint or key, again at most every 30 s, and one when it is over.
 
-What it is: transport.WaitLines and wait_with_lines on a fake clock; an env worker's links waiting
+What it is: transport.WaitReporter and wait_with_lines on a fake clock; an env worker's links waiting
 for weights through a real router in this process; and a real `laneshift learner` started with no
 router, which must say it waits for the router, then, once one is started, that it connected and
 that it waits for the replay server.
@@ -40,9 +40,9 @@ class FakeClock:
         return self.now
 
 
-def lines_on(clock: FakeClock, **kw) -> tuple[transport.WaitLines, list[str]]:
+def lines_on(clock: FakeClock, **kw) -> tuple[transport.WaitReporter, list[str]]:
     out: list[str] = []
-    return transport.WaitLines("learner", "the zenoh router at tcp/127.0.0.1:1 (transport.router)",
+    return transport.WaitReporter("learner", "the zenoh router at tcp/127.0.0.1:1 (transport.router)",
                                "connected to the zenoh router at tcp/127.0.0.1:1", clock=clock, emit=out.append,
                                **kw), out
 
