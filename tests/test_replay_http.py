@@ -30,7 +30,7 @@ from laneshift.config import ReplayConfig
 from laneshift.replay_server import http_api, http_models
 from laneshift.replay_server.core import ReplayCore
 from laneshift.replay_server.http_api import make_app, serve_http
-from laneshift.replay_server.inspect import render
+from laneshift.replay_server.stats_table import render
 from laneshift.replay_server.storage import DemoTable
 from laneshift.wire import SampleRequest, TransitionBatch, TransitionSchema
 

@@ -91,7 +91,7 @@ def video_path(text: str) -> str:
 def _replay_inspect(args: argparse.Namespace) -> int:
     from laneshift import transport
     from laneshift.config import TransportConfig
-    from laneshift.replay_server.inspect import inspect_main
+    from laneshift.replay_server.stats_table import inspect_main
 
     # inspect_main's session waits for a router forever (what services want): first make sure one
     # answers, giving up after --connect-timeout with the endpoint named.
