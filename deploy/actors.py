@@ -243,11 +243,12 @@ class LearnerActor(_Service):
 
     def run(self) -> dict:
         self.learner.run()  # returns on stop(), a stop message, or the stop criterion
-        return {**self._last_status(), "restored_from": self.learner.restored_from,
-                "checkpoint_failures": self.learner.checkpoint_failures, "device": str(self.learner.agent.device)}
+        return {**self.status(), "restored_from": self.learner.restored_from,
+                "device": str(self.learner.agent.device)}
 
     def status(self) -> dict:
-        return {**self._last_status(), "checkpoint_failures": self.learner.checkpoint_failures}
+        return {**self._last_status(), "checkpoint_failures": self.learner.checkpoint_failures,
+                "metrics_write_failures": self.learner.metrics_write_failures}
 
     def _last_status(self) -> dict[str, Any]:
         """The learner's status of its newest log interval as the launcher reads it ({} before the first)."""

@@ -112,6 +112,12 @@ class Builder:
         the other shards of a sharded replay (``replay.shards``)."""
         return replay_server_names(self.cfg.replay.shards)
 
+    def replay_stats_file(self, shard: int = 0) -> str:
+        """The name, in the run dir, of replay shard ``shard``'s final stats (``replay_stats.json``)."""
+        from laneshift.replay_server.service import shard_files
+
+        return shard_files(self.cfg, shard)[1]
+
     def replay_server(self, shard: int = 0) -> ReplayServer:
         """Core + zenoh service + HTTP API, as one server with start()/stop() (shard ``shard``)."""
         from laneshift.replay_server.service import ReplayServer

@@ -41,7 +41,7 @@ from laneshift.config import RunConfig
 from .errors import LaunchError
 from .pinning import own_cpus, resolve_learner_core, restore_own_cpus
 from .ray_connection import RayConnection
-from .run_dir import RunDirLock, ensure_demo_shard, prepare_run_dir
+from .run_dir import RunDirLock, SpaceReserve, ensure_demo_shard, prepare_run_dir
 from .spec_process import SpecProcess
 from .stop_signals import StopSignals
 from .summary import summarise
@@ -62,6 +62,7 @@ def train(cfg: RunConfig, *, address: str | None = None, out: TextIO = sys.stdou
                       learner=cfg.learner if cfg.learner.metrics_port != -1
                       else dataclasses.replace(cfg.learner, metrics_port=0))
     lock = RunDirLock(run_dir)
+    reserve = SpaceReserve(run_dir)
     ray_conn = RayConnection(address)
     launcher_cpus = own_cpus()  # Run.start may move this process off the learner's CPU
     run: Run | None = None
@@ -70,6 +71,7 @@ def train(cfg: RunConfig, *, address: str | None = None, out: TextIO = sys.stdou
     try:
         lock.acquire()
         prepare_run_dir(run_dir, resume, overwrite, out)
+        reserve.hold(out)
         # The env's spec, computed here once while Ray starts (Ray's start is mostly waiting), is
         # shipped to the replay server and the learner, which then build no simulator of their own.
         spec_child = SpecProcess(cfg)
@@ -97,11 +99,9 @@ def train(cfg: RunConfig, *, address: str | None = None, out: TextIO = sys.stdou
         run.kill_all()
         if run.progress.tty:
             out.write("\n")
+        reserve.release()  # the room kept for the end records below
         result = summarise(run.ended(), why, time.monotonic() - started, out)
-        try:
-            (run_dir / "summary.json").write_text(json.dumps(result, indent=2))
-        except OSError as exc:  # a full or read-only run dir: the summary above is all there is
-            print(f"train: could not write {run_dir / 'summary.json'}: {exc}", file=out, flush=True)
+        write_end_records(run_dir, result, run.replay_finals, out)
         rc = {"done": 0, "SIGINT": 130, "SIGTERM": 143}.get(why, 0)
     except LaunchError as exc:
         print(f"\ntrain: {exc}", file=out, flush=True)
@@ -114,6 +114,7 @@ def train(cfg: RunConfig, *, address: str | None = None, out: TextIO = sys.stdou
             run.stop(graceful_s=30)
         rc = 130 if signals.received != signal.SIGTERM else 143
     finally:
+        reserve.release()
         if spec_child is not None:
             spec_child.close()
         if run is not None:
@@ -124,3 +125,25 @@ def train(cfg: RunConfig, *, address: str | None = None, out: TextIO = sys.stdou
         signals.restore()
         restore_own_cpus(launcher_cpus)
     return rc
+
+
+def write_end_records(run_dir: Path, result: dict, replay_finals: dict[str, dict], out: TextIO) -> None:
+    """``summary.json``, and each replay server's final stats that the server could not write itself
+    (a full run dir: it counted the failure, and the launcher holds the same stats). A file that
+    cannot be written is said in one line: the summary printed above is then all there is."""
+    files = {"summary.json": result, **{name: stats for name, stats in replay_finals.items()
+                                        if not _json_file(run_dir / name)}}
+    for name, body in files.items():
+        try:
+            (run_dir / name).write_text(json.dumps(body, indent=2))
+        except OSError as exc:
+            print(f"train: could not write {run_dir / name}: {exc}", file=out, flush=True)
+
+
+def _json_file(path: Path) -> bool:
+    """``path`` holds a whole JSON document (not missing, not cut short by a full disk)."""
+    try:
+        json.loads(path.read_text())
+        return True
+    except (OSError, ValueError):
+        return False

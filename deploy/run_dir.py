@@ -1,6 +1,7 @@
 """A run's directory before the launch: one launcher per run dir (``RunDirLock``), a run dir
-that already holds a run refused unless ``--resume`` or ``--overwrite`` (``prepare_run_dir``), and
-the default scripted demo shard made once under ``<run dir>/../demos/`` (``ensure_demo_shard``).
+that already holds a run refused unless ``--resume`` or ``--overwrite`` (``prepare_run_dir``),
+room kept for the run's end records (``SpaceReserve``), and the default scripted demo shard made
+once under ``<run dir>/../demos/`` (``ensure_demo_shard``).
 
 Room: deploy, the wiring. May import: the contract, the demo tools, the env (for the demo shard's
 size and name).
@@ -47,6 +48,39 @@ class RunDirLock:
         if self._fd is not None:
             os.close(self._fd)
             self._fd = None
+
+
+class SpaceReserve:
+    """Room kept in the run dir for the run's end records (``summary.json``, the replay's final
+    stats): a file of ``size`` bytes written at the launch and removed just before they are
+    written, so that a run dir that fills up during the run (checkpoints, logs, metrics: each
+    failure counted) still gets the run's accounting. Why: on a full disk the summary alone was
+    printed and the counts of what was stored and lost were nowhere on disk (``laneshift chaos
+    --faults disk-full``). A reserve that cannot be written (a disk already full) is said in one
+    line; the run goes on without it."""
+
+    NAME = ".space-reserve"
+
+    def __init__(self, run_dir: Path, size: int = 1 << 20):
+        self.path, self.size = run_dir / self.NAME, size
+
+    def hold(self, out: TextIO) -> bool:
+        try:
+            with self.path.open("wb") as f:  # written, not truncated to size: real blocks, not a hole
+                f.write(bytes(self.size))
+            return True
+        except OSError as exc:
+            self.release()
+            print(f"train: no room kept for the end records in {self.path.parent} ({exc})", file=out, flush=True)
+            return False
+
+    def release(self) -> None:
+        try:
+            self.path.unlink()
+        except FileNotFoundError:
+            pass
+        except OSError:  # a read-only run dir: the file stays, harmless
+            pass
 
 
 #: What a run leaves in its run dir that a new run must not silently reuse (and RUN_STATE_GLOBS:

@@ -50,6 +50,7 @@ def summarise(run: RunEnd, why: str, wall: float, out: TextIO) -> dict:
         lost_batches += max(0, s["batches"] - 1 - int(seen["last_seq"]))
         lost_items += max(0, s["env_steps"] - int(seen["env_steps"]))
     waits = wait_shares(summaries, last)
+    failures = write_failures(replay, last)
     placement = {**{k: {"node_id": v["node_id"], "node_ip": v["node_ip"]} for k, v in run.where.items()},
                  **{s["name"]: {"node_id": s.get("node"), "node_ip": s.get("node_ip")} for s in summaries}}
     nodes = sorted({p["node_ip"] for p in placement.values() if p.get("node_ip")})
@@ -63,6 +64,9 @@ def summarise(run: RunEnd, why: str, wall: float, out: TextIO) -> dict:
         f"replay          {replay.get('tables', {}).get('online', {}).get('inserted', '-')} items stored, "
         f"{lost_batches} batches ({lost_items} items) lost and counted",
         f"restarts        " + (", ".join(f"{k} {v}" for k, v in run.restarts.items()) or "none"),
+        *([f"write failures  " + ", ".join(f"{n} {k.replace('_', ' ')}" for k, n in failures.items() if n)
+           + " (a full or read-only run dir; each counted, what was not written is said above)"]
+          if any(failures.values()) else []),
         f"learner         {last.get('updates', 0):,} updates, final weights version {last.get('version', 0)}"
         + _updates_lost_text(last.get("restored_from")),
         *waits_line(cfg, waits),
@@ -75,7 +79,7 @@ def summarise(run: RunEnd, why: str, wall: float, out: TextIO) -> dict:
     final = run_dir / "checkpoints" / "final.safetensors"
     result: dict = {"workers": summaries, "learner": last, "wall_s": round(wall, 1), "env_steps": steps,
                     "episodes": episodes, "eval": None, "ended_by": why, "placement": placement,
-                    "restarts": dict(run.restarts), "waits": waits,
+                    "restarts": dict(run.restarts), "waits": waits, "write_failures": failures,
                     "replay": {"inserted": replay.get("tables", {}).get("online", {}).get("inserted"),
                                "lost_batches": lost_batches, "lost_items": lost_items,
                                "rejected": replay.get("rejected")}}
@@ -91,6 +95,15 @@ def summarise(run: RunEnd, why: str, wall: float, out: TextIO) -> dict:
     lines += [f"run dir         {run_dir}", f"checkpoint      {final}", f"tensorboard     {_tensorboard_command()} --logdir {run_dir / 'tb'}"]
     print("\n".join(lines), file=out, flush=True)
     return result
+
+
+def write_failures(replay: dict, learner: dict) -> dict[str, int]:
+    """Writes to the run dir that failed and were counted, by kind: the replay server's
+    checkpoints and write-ahead-log records, the learner's checkpoints and its metrics records."""
+    return {"replay_checkpoints": int((replay.get("checkpoint") or {}).get("failures", 0)),
+            "write_ahead_log_records": int((replay.get("wal") or {}).get("failures", 0)),
+            "learner_checkpoints": int(learner.get("checkpoint_failures", 0)),
+            "metrics_records": int(learner.get("metrics_write_failures", 0))}
 
 
 #: The final greedy evaluation's numbers that go to TensorBoard (``final_eval/*``) and metrics.jsonl.

@@ -43,6 +43,7 @@ class Run:
         self.summaries: dict[str, dict] = {}
         self.progress = Progress(out, cfg.train.env_steps)
         self.replay_final: dict | None = None
+        self.replay_finals: dict[str, dict] = {}  # stats file name -> that replay server's final stats
         self.learner_final: dict | None = None
         self.timeline: dict[str, float] = {}  # seconds each start-up stage took
         self.env_spec: dict | None = None  # envspec.spec_to_dict of the run's env, shipped to components
@@ -331,10 +332,11 @@ class Run:
             except ray.exceptions.RayError as exc:
                 self._say(f"train: learner did not stop cleanly: {_cause(exc)}")
         finals = []
-        for name in (n for n in self.builder.replay_servers if n in self.handles):
-            final = self._stop_replay_server(name, graceful_s)
+        for shard, name in enumerate(self.builder.replay_servers):
+            final = self._stop_replay_server(name, graceful_s) if name in self.handles else None
             if final is not None:
                 finals.append(final)
+                self.replay_finals[self.builder.replay_stats_file(shard)] = final
         if finals:  # the run's replay as one (a sharded replay: every shard's counters summed)
             from laneshift.replay_stats import merge_replay_stats
 

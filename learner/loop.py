@@ -120,6 +120,11 @@ class Learner:
         """Checkpoint, state and published-version writes that failed (counted, retried later)."""
         return self.files.failures
 
+    @property
+    def metrics_write_failures(self) -> int:
+        """metrics.jsonl lines and TensorBoard events lost to failed writes (a full run dir)."""
+        return self.metrics.write_failures
+
     def _restore(self) -> dict | None:
         """A restarted (or resumed) learner goes on from its last full state.
 

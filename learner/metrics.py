@@ -1,6 +1,8 @@
 """Learner metrics: TensorBoard event files plus a JSON-lines log in the run dir.
 
-- ``MetricsLog``: ``<run dir>/tb`` (tensorboardX) and ``<run dir>/metrics.jsonl``, one line per
+- ``EventFile``: TensorBoard event records written in the caller's thread (tensorboardX's
+  ``EventsWriter``), a failed write counted and the file abandoned, a new one tried later.
+- ``MetricsLog``: ``<run dir>/tb`` (an ``EventFile``) and ``<run dir>/metrics.jsonl``, one line per
   record: ``{"kind", "step", "time", ...}``. ``step`` is the record's TensorBoard step: env steps
   for training records (the update count only in rehearsal / DQfD phase 1, which has no env
   steps). Other tools read ``kind``, ``env_steps``, ``updates`` and ``time`` from these lines.
@@ -23,8 +25,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from tensorboardX import SummaryWriter
+from tensorboardX.event_file_writer import EventsWriter
+from tensorboardX.proto import event_pb2
 from tensorboardX.summary import hparams as hparams_summaries
+from tensorboardX.summary import scalar as scalar_summary
+from tensorboardX.summary import text as text_summary
 
 
 def _number(v: Any) -> float | None:
@@ -36,21 +41,90 @@ def _number(v: Any) -> float | None:
     return None
 
 
-def _writer(logdir: Path, **kw: Any) -> SummaryWriter:
-    """A SummaryWriter whose event file name cannot be another's: tensorboardX names files by the
-    second and opens them with "wb", so a learner restarted (or resumed) within the same second
-    would empty the previous one's file. The suffix (nanoseconds) keeps the names in time order,
-    the order TensorBoard reads a directory's files in."""
-    return SummaryWriter(str(logdir), filename_suffix=f".{time.time_ns()}", **kw)
+class EventFile:
+    """TensorBoard events appended to ``<logdir>/events.out.tfevents.*`` in the caller's thread.
+
+    Why not tensorboardX's ``SummaryWriter``: its background thread dies on the first failed write
+    (a full disk), and the next ``add_*`` then blocks for ever on the thread's full queue; that
+    stalled the learner, and through the rate limiter the whole run (``laneshift chaos --faults
+    disk-full``). Here a write that fails is counted (``failures``: events lost), the file is
+    abandoned (a record may be cut short in it) and a new file is tried ``retry_s`` later, so
+    events come back once there is room again. Flushed (with fsync, as tensorboardX does) at most
+    every ``flush_s``; a few dozen small records a second cost the learner nothing measurable.
+    """
+
+    def __init__(self, logdir: Path, *, flush_s: float = 5.0, retry_s: float = 30.0,
+                 clock: Any = time.monotonic):
+        self.logdir, self.flush_s, self.retry_s, self.clock = Path(logdir), flush_s, retry_s, clock
+        self.failures = 0
+        self._events: EventsWriter | None = None
+        self._retry_at = 0.0
+        self._flush_at = 0.0
+
+    def _file(self) -> EventsWriter | None:
+        if self._events is None and self.clock() >= self._retry_at:
+            try:
+                self.logdir.mkdir(parents=True, exist_ok=True)
+                # The suffix (nanoseconds): tensorboardX names files by the second and opens them
+                # with "wb", so a learner restarted within the same second would empty the previous
+                # one's file; nanoseconds keep the names in time order, TensorBoard's reading order.
+                self._events = EventsWriter(str(self.logdir / "events"), f".{time.time_ns()}")
+                self._flush_at = self.clock() + self.flush_s
+            except OSError:
+                self._retry_at = self.clock() + self.retry_s
+        return self._events
+
+    def add(self, summary: Any, step: int) -> None:
+        """One ``Summary`` proto as an event at ``step``."""
+        events = self._file()
+        if events is None:
+            self.failures += 1
+            return
+        try:
+            events.write_event(event_pb2.Event(wall_time=time.time(), step=int(step), summary=summary))
+            if self.clock() >= self._flush_at:
+                events.flush()
+                self._flush_at = self.clock() + self.flush_s
+        except OSError:
+            self.failures += 1
+            self._abandon()
+
+    def add_scalar(self, tag: str, value: float, step: int) -> None:
+        self.add(scalar_summary(tag, value), step)
+
+    def add_text(self, tag: str, text: str, step: int) -> None:
+        self.add(text_summary(tag, text), step)
+
+    def _abandon(self) -> None:
+        events, self._events = self._events, None
+        self._retry_at = self.clock() + self.retry_s
+        if events is not None:
+            try:
+                events.close()
+            except OSError:
+                pass
+
+    def close(self) -> None:
+        if self._events is not None:
+            try:
+                self._events.close()
+            except OSError:
+                self.failures += 1
+            self._events = None
 
 
 class MetricsLog:
     def __init__(self, run_dir: str | Path):
         self.dir = Path(run_dir)
         self.dir.mkdir(parents=True, exist_ok=True)
-        self.tb = _writer(self.dir / "tb", flush_secs=5)
+        self.tb = EventFile(self.dir / "tb")
         self._jsonl = (self.dir / "metrics.jsonl").open("a", buffering=1)
-        self.write_failures = 0
+        self.jsonl_failures = 0  # metrics.jsonl lines lost (a full or read-only run dir)
+
+    @property
+    def write_failures(self) -> int:
+        """Records lost to failed writes: metrics.jsonl lines and TensorBoard events."""
+        return self.jsonl_failures + self.tb.failures
 
     def write(self, kind: str, step: int, record: Mapping[str, Any],
               scalars: Mapping[str, Any] | None = None) -> None:
@@ -65,7 +139,7 @@ class MetricsLog:
         try:
             self._jsonl.write(json.dumps({"kind": kind, "step": step, "time": time.time(), **record}) + "\n")
         except OSError:  # a full disk: the metrics line is lost (counted), training goes on
-            self.write_failures += 1
+            self.jsonl_failures += 1
 
     def scalars(self, step: int, values: dict[str, float], kind: str = "learner") -> None:
         """``write(kind, step, values)``: every number as ``<kind>/<key>``."""
@@ -81,23 +155,22 @@ class MetricsLog:
         resumed run writes there again, and TensorBoard shows the newest values."""
         hp = {f"{section}.{k}": _hparam_value(v) for section, body in config.items() for k, v in body.items()}
         final = {tag: x for tag, v in metrics.items() if (x := _number(v)) is not None}
-        # SummaryWriter.add_hparams's own steps, with this module's event file names.
+        # SummaryWriter.add_hparams's three summaries, written as an EventFile (no writer thread).
         experiment, session_start, session_end = hparams_summaries(hp, final)
-        try:
-            with _writer(self.dir / "tb" / "hparams") as w:
-                for summary in (experiment, session_start, session_end):
-                    w.file_writer.add_summary(summary)
-                for tag, x in final.items():
-                    w.add_scalar(tag, x, step)
-        except OSError:
-            self.write_failures += 1
+        events = EventFile(self.dir / "tb" / "hparams")
+        for summary in (experiment, session_start, session_end):
+            events.add(summary, 0)
+        for tag, x in final.items():
+            events.add_scalar(tag, x, step)
+        events.close()
+        self.tb.failures += events.failures
 
     def close(self) -> None:
         self.tb.close()
         try:
             self._jsonl.close()
         except OSError:
-            self.write_failures += 1
+            self.jsonl_failures += 1
 
 
 def _hparam_value(v: Any) -> bool | float | int | str:

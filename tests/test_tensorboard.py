@@ -378,3 +378,58 @@ def test_a_long_run_evaluates_greedily_during_training_unless_told_otherwise():
     assert long_run.train.eval_every == -1 and long_run.train.eval_interval == AUTO_EVAL_FROM // 10
     assert load_run_config(overrides={"train.env_steps": 10**6, "train.eval_every": 0}).train.eval_interval == 0
     assert load_run_config(overrides={"train.eval_every": 500}).train.eval_interval == 500
+
+
+def test_a_failed_event_write_is_counted_never_blocks_and_a_new_file_takes_over_once_there_is_room(
+        tmp_path, monkeypatch):
+    """A full disk: tensorboardX's own writer thread died on such a write and the learner then
+    blocked for ever on its full queue (the whole run stalled). Here every event lost is counted,
+    no call waits, and after ``retry_s`` a new event file carries on."""
+    import errno
+
+    from laneshift.learner import metrics
+
+    full = [True]
+
+    class FillingDisk(metrics.EventsWriter):
+        def _write_serialized_event(self, event_str):
+            if full[0]:
+                raise OSError(errno.ENOSPC, "No space left on device")
+            super()._write_serialized_event(event_str)
+
+    monkeypatch.setattr(metrics, "EventsWriter", FillingDisk)
+    now = [0.0]
+    events = metrics.EventFile(tmp_path / "tb", retry_s=30.0, clock=lambda: now[0])
+    started = time.monotonic()
+    for step in range(100):  # far more than tensorboardX's queue of 10
+        events.add_scalar("learner/loss", float(step), step)
+    assert time.monotonic() - started < 5.0
+    assert events.failures == 100
+    full[0] = False
+    now[0] = 29.0  # not yet: still counted, no file opened
+    events.add_scalar("learner/loss", 100.0, 100)
+    assert events.failures == 101
+    now[0] = 31.0
+    for step in range(101, 106):
+        events.add_scalar("learner/loss", float(step), step)
+    events.close()
+    assert events.failures == 101
+    acc = event_accumulator.EventAccumulator(str(tmp_path / "tb"))
+    acc.Reload()
+    assert [e.step for e in acc.Scalars("learner/loss")] == [101, 102, 103, 104, 105]
+
+
+def test_the_metrics_logs_failures_count_lost_lines_and_lost_events(tmp_path, monkeypatch):
+    from laneshift.learner.metrics import MetricsLog
+
+    log = MetricsLog(tmp_path)
+    log.write("learner", 1, {"loss": 0.5, "updates": 3})  # two scalars and one line
+
+    def refuse(*_a, **_k):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(log._jsonl, "write", refuse)
+    monkeypatch.setattr(log.tb, "_file", lambda: None)  # no event file can be opened
+    log.write("learner", 2, {"loss": 0.4, "updates": 4})
+    assert (log.jsonl_failures, log.tb.failures, log.write_failures) == (1, 2, 3)
+    log.close()

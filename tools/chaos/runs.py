@@ -148,8 +148,10 @@ def _monotonic(summary: dict) -> bool:
 
 
 def _write_failures(summary: dict, replay: dict) -> dict[str, int]:
-    return {"replay_checkpoint": int((replay.get("checkpoint") or {}).get("failures", 0)),
-            "learner": int(summary["learner"].get("checkpoint_failures", 0))}
+    """The run's failed writes by kind, as its summary counted them (``deploy.summary.write_failures``)."""
+    from laneshift.deploy.summary import write_failures
+
+    return write_failures(replay, summary["learner"])
 
 
 def _launcher_fault(name: str, spec: dict, run_dir: Path, env_steps: int) -> dict:
@@ -234,8 +236,13 @@ def _disk_full(name: str, spec: dict, where: Path, env_steps: int) -> dict:
         out = io.StringIO()
         started = time.monotonic()
         rc = train_local(cfg, out=out)
-        summary = json.loads((run_dir / "summary.json").read_text())
-        replay = json.loads((run_dir / "replay_stats.json").read_text())
+        try:
+            summary = json.loads((run_dir / "summary.json").read_text())
+            replay = json.loads((run_dir / "replay_stats.json").read_text())
+        except (OSError, ValueError) as exc:  # the run's end records did not land: the row says so
+            return {"fault": name, "rc": rc, "wall_s": round(time.monotonic() - started, 1), "injected": True,
+                    "survived": False, "why": f"the run's end records are missing: {exc}",
+                    "log_tail": out.getvalue()[-3000:]}
         made = sum(w["env_steps"] for w in summary["workers"])
         stored, lost = int(replay["tables"]["online"]["inserted"]), int(summary["replay"]["lost_items"])
         failures = _write_failures(summary, replay)
