@@ -58,10 +58,12 @@ METHODS: dict[str, dict[str, Any]] = {
     "dqfd-bc-safe": {**_DQFD, "learner.bc_loss_weight": 1.0, "learner.dueling": True,
                      "learner.lr_final": 5e-5, "learner.ema_decay": 0.999, "actor.epsilon_final": 0.01,
                      "learner.terminal_value": -100.0},
-    # The two changes that each helped on their own, together: dqfd-bc-alongside's observation and
-    # dqfd-bc-safe's crash value (docs/RESULTS.md, merge: the risk ablation).
+    # dqfd-bc-alongside for which a crash costs far more than any wait: after a terminal step the
+    # target bootstraps -1,000. Chosen on merge's validation episodes among 0, -100, -300 and -1,000
+    # (and gamma 0.995): survival and achievement rose with the cost, from both start settings
+    # (docs/RESULTS.md, merge: what a crash costs).
     "dqfd-bc-alongside-safe": {**_DQFD, **_ANNEALED_LEARNER, "learner.bc_loss_weight": 1.0,
-                               "env.alongside_features": True, "learner.terminal_value": -100.0},
+                               "env.alongside_features": True, "learner.terminal_value": -1000.0},
 }
 
 
