@@ -91,7 +91,8 @@ def run_fault(name: str, work: Path, env_steps: int, demos: str | None) -> dict:
             proxy.stop()
     row: dict = {"fault": name, "rc": rc, "wall_s": round(time.monotonic() - started, 1),
                  "injected": inject.struck, "recovery_s": inject.recovery_s,
-                 **({"stops": inject.stops} if getattr(inject, "when_stopped", None) else {})}
+                 **({"stops": inject.stops} if getattr(inject, "when_stopped", None) else {}),
+                 **({"strike_error": inject.error} if getattr(inject, "error", "") else {})}
     ended = _ended(run_dir)
     if ended is None:
         return {**row, "survived": False, "log_tail": out.getvalue()[-2000:]}
