@@ -66,8 +66,10 @@ class SpaceReserve:
 
     def hold(self, out: TextIO) -> bool:
         try:
-            with self.path.open("wb") as f:  # written, not truncated to size: real blocks, not a hole
-                f.write(bytes(self.size))
+            # Written, not truncated to size (a hole holds no blocks), and random, so that a
+            # compressing or deduplicating filesystem keeps the room too.
+            with self.path.open("wb") as f:
+                f.write(os.urandom(self.size))
             return True
         except OSError as exc:
             self.release()
@@ -77,9 +79,7 @@ class SpaceReserve:
     def release(self) -> None:
         try:
             self.path.unlink()
-        except FileNotFoundError:
-            pass
-        except OSError:  # a read-only run dir: the file stays, harmless
+        except OSError:  # gone already, or a read-only run dir (the file stays, harmless)
             pass
 
 
