@@ -105,7 +105,7 @@ def run_fault(name: str, work: Path, env_steps: int, demos: str | None) -> dict:
                 "demo_identical": (_digest([demos]) == demo_before) if demos else None,
                 "left_behind": len(_ray_processes(run_dir))})
     if spec.get("read_only_s"):  # the fault must have struck: writes failed, counted, and training went on
-        row["write_failures_counted"] = failures = _write_failures(summary, replay)
+        row["write_failures_counted"] = failures = summary["write_failures"]
         row["survived"] = row["survived"] and inject.struck and sum(failures.values()) > 0
     if proxy is not None:  # every strike landed, while the run went on, and nothing was lost
         stats = proxy.stats.as_dict()
@@ -146,13 +146,6 @@ def _accounting(summary: dict, replay: dict) -> tuple[int, int, int]:
 
 def _monotonic(summary: dict) -> bool:
     return all([v for v, _ in w["version_runs"]] == sorted(v for v, _ in w["version_runs"]) for w in summary["workers"])
-
-
-def _write_failures(summary: dict, replay: dict) -> dict[str, int]:
-    """The run's failed writes by kind, as its summary counted them (``deploy.summary.write_failures``)."""
-    from laneshift.deploy.summary import write_failures
-
-    return write_failures(replay, summary["learner"])
 
 
 def _launcher_fault(name: str, spec: dict, run_dir: Path, env_steps: int) -> dict:
@@ -246,7 +239,7 @@ def _disk_full(name: str, spec: dict, where: Path, env_steps: int) -> dict:
                     "log_tail": out.getvalue()[-3000:]}
         made = sum(w["env_steps"] for w in summary["workers"])
         stored, lost = int(replay["tables"]["online"]["inserted"]), int(summary["replay"]["lost_items"])
-        failures = _write_failures(summary, replay)
+        failures = summary["write_failures"]
         time.sleep(2)
         return {"fault": name, "rc": rc, "wall_s": round(time.monotonic() - started, 1), "injected": True,
                 "recovery_s": 0.0, "survived": rc == 0 and made == env_steps and sum(failures.values()) > 0,
