@@ -42,7 +42,6 @@ class Run:
         self.where: dict[str, dict] = {}
         self.summaries: dict[str, dict] = {}
         self.progress = Progress(out, cfg.train.env_steps)
-        self.replay_final: dict | None = None
         self.replay_finals: dict[str, dict] = {}  # stats file name -> that replay server's final stats
         self.learner_final: dict | None = None
         self.timeline: dict[str, float] = {}  # seconds each start-up stage took
@@ -331,16 +330,10 @@ class Run:
                     self.learner_final = ray.get(self.refs["learner"], timeout=graceful_s)
             except ray.exceptions.RayError as exc:
                 self._say(f"train: learner did not stop cleanly: {_cause(exc)}")
-        finals = []
         for shard, name in enumerate(self.builder.replay_servers):
             final = self._stop_replay_server(name, graceful_s) if name in self.handles else None
             if final is not None:
-                finals.append(final)
                 self.replay_finals[self.builder.replay_stats_file(shard)] = final
-        if finals:  # the run's replay as one (a sharded replay: every shard's counters summed)
-            from laneshift.replay_stats import merge_replay_stats
-
-            self.replay_final = merge_replay_stats(finals, all_actors=True)
         if "router" in self.handles:
             try:
                 ray.get(self.handles["router"].stop.remote(), timeout=10)
@@ -392,8 +385,17 @@ class Run:
     def ended(self) -> RunEnd:
         """What the summary reads of the run, once its components have stopped."""
         return RunEnd(cfg=self.cfg, workers=[self.summaries[n] for n in self.builder.workers if n in self.summaries],
-                      learner={**self.progress.last, **(self.learner_final or {})}, replay=self.replay_final or {},
+                      learner={**self.progress.last, **(self.learner_final or {})}, replay=self._replay_as_one(),
                       where=dict(self.where), restarts=dict(self.deaths))
+
+    def _replay_as_one(self) -> dict:
+        """The replay servers' final stats as one (a sharded replay: every shard's counters summed);
+        {} if none gave its stats."""
+        if not self.replay_finals:
+            return {}
+        from laneshift.replay_stats import merge_replay_stats
+
+        return merge_replay_stats(list(self.replay_finals.values()), all_actors=True)
 
     def _say(self, text: str) -> None:
         self.progress.say(text)
