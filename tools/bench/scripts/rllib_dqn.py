@@ -177,9 +177,7 @@ def greedy_rates(algo, episodes: int, seed: int) -> dict:
             batch = {"obs": torch.as_tensor(obs, dtype=torch.float32).unsqueeze(0)}
             return int(module.forward_inference(batch)["actions"][0])
 
-    env_cfg = EnvConfig(scenario=SCENARIO, observation=ENV_KWARGS["observation"],
-                        reward_preset=ENV_KWARGS["reward_preset"], initial_lane=ENV_KWARGS["initial_lane"])
-    rates = evaluate_lanes(lambda _env: greedy, env_cfg, episodes, seed)
+    rates = evaluate_lanes(lambda _env: greedy, EnvConfig(scenario=SCENARIO, **ENV_KWARGS), episodes, seed)
     return {lane: {k: r[k] for k in ("survival_rate", "achievement_rate") if k in r} for lane, r in rates.items()}
 
 
