@@ -1,6 +1,7 @@
 """The replay core's book of actors (``ActorLedger``, a base of ``core.ReplayCore``): each actor's
 counters and row index, admitted on its first batch and, past ``MAX_ACTORS``, the one idle longest
-evicted (its counters remembered, so one that comes back continues them); the seqs counted lost that
+evicted (its counters remembered, so one that comes back continues them), with a place always kept
+for each of the run's own env workers; the seqs counted lost that
 a resend may still fill (``gaps.Gaps``); what a restarted actor resumes from (``actor_state``,
 ``delivery_state``); the pages of per-actor stats; and a checkpoint's actors taken back.
 
@@ -16,6 +17,7 @@ from __future__ import annotations
 import collections
 import threading
 import time
+from collections.abc import Iterable
 from typing import Any
 
 from laneshift.config import ReplayConfig
@@ -42,7 +44,11 @@ class ActorLedger:
     lock: threading.Lock
     online: RingTable | FrameRingTable
 
-    def init_ledger(self) -> None:
+    def init_ledger(self, own_actors: Iterable[str] = ()) -> None:
+        # The run's own env workers: a place each is kept for them, so that other names, however
+        # many (a foreign client, a misconfigured fleet), can never lock out a worker that joins
+        # late; without it a late worker's every batch was refused and the run stalled.
+        self.own_actors = frozenset(own_actors)
         self.actors: dict[str, dict[str, int]] = {}
         self.actor_index: dict[str, int] = {}  # actor -> its row index in the online table's actor column
         self._free_indices: collections.deque[int] = collections.deque()  # of evicted actors, reused
@@ -77,10 +83,14 @@ class ActorLedger:
 
     def _admit(self, actor: str) -> dict[str, int] | None:
         """State for an actor not in the table (called under the lock): its remembered state if it
-        was evicted, else fresh. At MAX_ACTORS the actor idle longest is evicted first, if idle for
-        ``replay.actor_idle_evict_s``; None if none is (the batch is refused)."""
-        if len(self.actors) >= MAX_ACTORS:
-            oldest = min(self._last_seen, key=self._last_seen.__getitem__, default=None)
+        was evicted, else fresh. Names other than ``own_actors`` share MAX_ACTORS less the places
+        kept for those; when theirs are taken, the other actor idle longest is evicted first, if
+        idle for ``replay.actor_idle_evict_s``; None if none is (the batch is refused)."""
+        if actor in self.own_actors:
+            if len(self.actors) >= MAX_ACTORS:  # only after a restore from a run with fewer places kept
+                self._evict(self._idle_longest_other())
+        elif len(self.actors) - len(self.own_actors.intersection(self.actors)) >= MAX_ACTORS - len(self.own_actors):
+            oldest = self._idle_longest_other()
             if oldest is None or time.monotonic() - self._last_seen[oldest] < self.cfg.actor_idle_evict_s:
                 return None
             self._evict(oldest)
@@ -96,6 +106,11 @@ class ActorLedger:
         self.actor_index[actor] = self._free_indices.popleft() if self._free_indices else len(self.actor_index)
         self.actors[actor] = stats
         return stats
+
+    def _idle_longest_other(self) -> str | None:
+        """The actor other than ``own_actors`` whose newest batch is oldest (None: there is none)."""
+        others = (a for a in self._last_seen if a not in self.own_actors)
+        return min(others, key=self._last_seen.__getitem__, default=None)
 
     def _evict(self, actor: str) -> None:
         """Move an idle actor's state out of the live table (called under the lock); its counters

@@ -34,6 +34,7 @@ import collections
 import os
 import threading
 import time
+from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
@@ -57,7 +58,10 @@ ACTORS_IN_STATS = 32
 
 
 class ReplayCore(ActorLedger, Sampling):
-    def __init__(self, cfg: ReplayConfig, schema: TransitionSchema, demo: DemoTable | None = None):
+    def __init__(self, cfg: ReplayConfig, schema: TransitionSchema, demo: DemoTable | None = None,
+                 own_actors: Iterable[str] = ()):
+        """``own_actors``: the run's own env workers' names, which always have a place in the
+        book of actors, however many other names have arrived (actor_ledger.py)."""
         self.cfg = cfg
         self.schema = schema
         self._rng = np.random.default_rng(cfg.seed)
@@ -96,7 +100,7 @@ class ReplayCore(ActorLedger, Sampling):
         # Counters (all guarded by lock).
         self.rejected: collections.Counter[str] = collections.Counter()
         self.dropped: collections.Counter[str] = collections.Counter()
-        self.init_ledger()  # each actor's counters and row index, the evicted ones', the gaps (actor_ledger.py)
+        self.init_ledger(own_actors)  # each actor's counters and row index, the evicted ones', the gaps (actor_ledger.py)
         self.samples = 0  # rows sampled while the rate limiter applies
         self.sampled_rows = 0
         self.sampled_demo_rows = 0

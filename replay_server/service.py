@@ -31,7 +31,7 @@ from pathlib import Path
 import zenoh
 
 from laneshift import transport, wire
-from laneshift.config import RunConfig
+from laneshift.config import RunConfig, worker_names
 from laneshift.envspec import EnvSpec
 
 from . import wal as wal_log
@@ -263,11 +263,12 @@ class ReplayService:
 
 def build_core(cfg: RunConfig, spec: EnvSpec, shard: int = 0) -> ReplayCore:
     """The replay core for a run (or for shard ``shard`` of a sharded replay: its share of the
-    capacity, ``ReplayConfig.shard``): schema from the env's spec, demo shards validated against it."""
+    capacity, ``ReplayConfig.shard``): schema from the env's spec, demo shards validated against
+    it, a place in its book of actors kept for each of the run's env workers."""
     demo = None
     if cfg.replay.demo_paths:  # demos become the same n-step items the actors send
         demo = load_demo_table(cfg.replay.demo_paths, spec, cfg.learner.n_step, cfg.learner.gamma)
-    return ReplayCore(cfg.replay.shard(shard), spec.schema, demo)
+    return ReplayCore(cfg.replay.shard(shard), spec.schema, demo, own_actors=worker_names(cfg.actor.workers))
 
 
 #: Env fields added after replay checkpoints were first written, with their defaults: such a field

@@ -362,6 +362,21 @@ def test_too_many_actors(monkeypatch):
     assert set(core.stats()["actors"]) == {"a", "b"} and core.stats()["rejected"] == {"too_many_actors": 1}
 
 
+def test_the_runs_own_workers_keep_their_places_however_many_other_names_arrive(monkeypatch):
+    """A flood of other names fills the book of actors before a late worker's first batch: the
+    worker still gets in (without its place, each of its batches was refused and the run stalled,
+    chaos row stats-flood); other names share what is left, and are refused once that is full."""
+    monkeypatch.setattr(actor_ledger, "MAX_ACTORS", 4)
+    core = ReplayCore(ReplayConfig(capacity=1000, min_size=1, actor_idle_evict_s=600), SCHEMA,
+                      own_actors=["w0", "w1"])
+    assert core.ingest(tmsg("w0"), "w0") is None
+    assert [core.ingest(tmsg(f"flood{i}"), f"flood{i}") for i in range(3)] == [None, None, "too_many_actors"]
+    assert core.ingest(tmsg("w1"), "w1") is None  # the late worker: its place was kept
+    assert core.ingest(tmsg("w1", 1), "w1") is None
+    assert set(core.stats()["actors"]) == {"w0", "w1", "flood0", "flood1"}
+    assert core.stats()["rejected"] == {"too_many_actors": 1}
+
+
 @pytest.mark.parametrize("version", [2**31, 2**63, 10**30])
 def test_ingest_huge_weights_version_never_raises_nor_stores_partially(version):
     """A huge ``weights_version`` never makes ``ingest`` raise: the batch is stored whole (the ring's

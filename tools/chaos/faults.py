@@ -51,7 +51,8 @@ FAULTS: dict[str, dict] = {
     "disk-full": {"disk_mb": 6, "overrides": {"replay.checkpoint_every_s": 2, "replay.capacity": 60_000}},
     # The run dir read-only from an eighth to half of the budget (at most 10 s): over before the run ends (a bind mount remounted ro: EROFS even for root), then writable again.
     "unwritable": {"read_only_s": 10.0, "overrides": {"replay.checkpoint_every_s": 1}},
-    # 5,000 actor names, one one-row batch each, from a foreign client, while stats are queried.
+    # 5,000 actor names, one one-row batch each, from a foreign client, with a stats query after each
+    # 500 (strikes.StatsFlood), at an eighth of the budget: a worker may not have sent its first batch yet.
     "stats-flood": {"flood_actors": 5000},
     # The link between the workers and the router (a proxy in front of it, deploy.worker_router):
     # every connection reset at a quarter, half and three quarters of the budget; a 10 s cut (the

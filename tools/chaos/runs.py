@@ -69,7 +69,7 @@ def run_fault(name: str, work: Path, env_steps: int, demos: str | None) -> dict:
     if spec.get("read_only_s"):
         inject = ReadOnlyRunDir(run_dir, at_steps=env_steps // 8, until_steps=env_steps // 2, seconds=spec["read_only_s"])
     elif spec.get("flood_actors"):
-        inject = StatsFlood(run_dir, at_steps=env_steps // 4, actors=spec["flood_actors"])
+        inject = StatsFlood(run_dir, at_steps=env_steps // 8, actors=spec["flood_actors"])
     elif proxy is not None:
         link = spec["link"]
         inject = LinkFault(run_dir, proxy, resets_at=[int(env_steps * f) for f in link.get("resets_at", ())],
@@ -115,8 +115,10 @@ def run_fault(name: str, work: Path, env_steps: int, demos: str | None) -> dict:
         row["survived"] = row["survived"] and inject.struck
     if spec.get("flood_actors"):
         row.update(inject.report())
+        # Every query answered, and all of them asked while the run was still going.
         row["survived"] = (row["survived"] and inject.struck and not summary.get("restarts")
-                           and inject.stats_answered == inject.stats_asked)
+                           and inject.stats_answered == inject.stats_asked == inject.queries
+                           and inject.steps_at_end < env_steps)
     return row
 
 

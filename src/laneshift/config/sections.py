@@ -164,8 +164,9 @@ class ReplayConfig:
     restore: bool = True  # restore the online table from the run dir's checkpoint (and log) at start
     http_port: int = -1  # HTTP inspection API: -1 off, 0 a free port, else that port
     http_host: str = "127.0.0.1"  # bind elsewhere only on purpose: the API has no authentication
-    # Per-actor state is bounded (4,096 actors); a new actor beyond that evicts the actor idle
-    # longest, if it has been idle this long, else it is refused (counted as too_many_actors).
+    # Per-actor state is bounded (4,096 actors, a place of them kept for each of the run's env
+    # workers); any other new actor beyond that evicts the other actor idle longest, if it has been
+    # idle this long, else it is refused (counted as too_many_actors).
     actor_idle_evict_s: float = 600.0
     # Stacked image observations are held once per frame (replay_server/frames.py): a ring of this
     # many frames per item of capacity. About 1 new frame an item in steady state; when the ring
