@@ -89,7 +89,7 @@ class ActorLedger:
         if actor in self.own_actors:
             if len(self.actors) >= MAX_ACTORS:  # only after a restore from a run with fewer places kept
                 self._evict(self._idle_longest_other())
-        elif len(self.actors) - len(self.own_actors.intersection(self.actors)) >= MAX_ACTORS - len(self.own_actors):
+        elif len(self.actors) - sum(a in self.actors for a in self.own_actors) >= MAX_ACTORS - len(self.own_actors):
             oldest = self._idle_longest_other()
             if oldest is None or time.monotonic() - self._last_seen[oldest] < self.cfg.actor_idle_evict_s:
                 return None
