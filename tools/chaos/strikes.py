@@ -233,10 +233,9 @@ class StatsFlood(Strike):
     of ``actors`` names (more than the replay server keeps state for), with a stats query after each
     tenth of them. The learner, the launcher and every stats reply must come through it.
 
-    The queries go out during the flood, not after it: asked after it (10 queries 0.2 s apart), the
-    last ones could come after an idle machine's short run had ended, so they went unanswered
-    because the run was over, not because the server failed (``stats-flood --demos``, 8 of 10 in
-    2 of 3 runs)."""
+    The queries go out during the flood, not after it: asked after it (10 queries 0.2 s apart, 2 s
+    in all), the last ones could come after an idle machine's short run had ended, and a reply
+    missing for that reason says nothing of the server."""
 
     WHAT = "stats-flood"
 
