@@ -64,6 +64,11 @@ METHODS: dict[str, dict[str, Any]] = {
     # (docs/RESULTS.md, merge: what a crash costs).
     "dqfd-bc-alongside-safe": {**_DQFD, **_ANNEALED_LEARNER, "learner.bc_loss_weight": 1.0,
                                "env.alongside_features": True, "learner.terminal_value": -1000.0},
+    # The LKA plant's recipe (MATLAB's lane-keeping example has no demonstrations): one-step Double
+    # DQN with a larger step size, learning from 1,000 items on and 64 samples per inserted item;
+    # 20,000 env steps centre the car (docs/RESULTS.md, LKA; `laneshift experiment lka`).
+    "matlab-dqn": {"replay.demo_mode": "none", "learner.lr": 1e-3, "replay.min_size": 1000,
+                   "replay.samples_per_insert": 64.0},
 }
 
 
