@@ -1,6 +1,6 @@
 #!/bin/bash
 # The lever ablation of docs/RESULTS.md ("Merge and roundabout: what did not move them"): prioritized
-# replay and 20-step returns on dqfd-bc-alongside-safe, merge and roundabout, one seed (0), 400,000 env
+# replay, 20-step returns and 1,000 demonstration episodes on dqfd-bc-alongside-safe, merge and roundabout, one seed (0), 400,000 env
 # steps a run; the final network on 200 validation episodes per initial-lane setting (seeds from
 # 200,000; never the test episodes). The bases are seed 0's final networks of the 400,000-step
 # protocol rows (results/checkpoints/{merge,roundabout}-dqfd-bc-alongside-safe-seed0-final.safetensors,
@@ -29,3 +29,5 @@ val merge merge-per400k --set replay.sampler=prioritized
 val merge merge-n20-400k --set learner.n_step=20
 val roundabout roundabout-per400k --set replay.sampler=prioritized
 val roundabout roundabout-n20-400k --set learner.n_step=20
+val merge merge-demos1000-400k --set train.demo_episodes=1000 --set replay.capacity=590000 --set replay.demo_ratio=0.5
+val roundabout roundabout-demos1000-400k --set train.demo_episodes=1000 --set replay.capacity=586000 --set replay.demo_ratio=0.5
