@@ -39,10 +39,10 @@ from laneshift.config import METHODS, ConfigError, EnvConfig, RunConfig, load_ru
 from laneshift.progress import progress, write
 from laneshift.tools.argtypes import add_set_arg, parse_set, positive_int, seed_list
 from laneshift.tools.studies.evaluate import evaluate_policy, load_greedy_policy, lka_response, plot_lka_response
-from laneshift.tools.studies.protocol import seed_state
+from laneshift.tools.studies.protocol import seed_state, train_seed
 from laneshift.tools.studies.protocol_results import TEST_SEED
 from laneshift.tools.studies.provenance import command_line, git_revision, write_json
-from laneshift.tools.studies.runs import method_config, train_logged
+from laneshift.tools.studies.runs import method_config
 from laneshift.tools.studies.stats import bootstrap_ci
 
 ROAD = "lka"
@@ -86,12 +86,7 @@ def run_seed(cfg: RunConfig, state: str, args: argparse.Namespace, out_dir: Path
     seed, method = cfg.train.seed, args.method
     run_dir = Path(cfg.train.run_dir)
     started = time.monotonic()
-    if state in ("new", "resume"):
-        try:
-            train_logged(cfg, out_dir / f"{method}-s{seed}.log", label=f"train {method} seed {seed}",
-                         resume=state == "resume")
-        except RuntimeError as exc:
-            raise SystemExit(f"seed {seed}: {exc}; the same command again continues it") from None
+    train_seed(cfg, state, out_dir, method)
     greedy = load_greedy_policy(run_dir / "checkpoints" / "final.safetensors")
     tested = test_drive(lambda env: greedy, cfg.env, args.test_episodes, f"test {method} seed {seed}",
                         out_dir / f"{method}-s{seed}.lka_response.png")

@@ -147,18 +147,26 @@ def plan(args: argparse.Namespace) -> tuple[Path, str, dict[int, RunConfig], dic
     return out_dir, road, configs, states
 
 
+def train_seed(cfg: RunConfig, state: str, out_dir: Path, method: str) -> None:
+    """Train a ``new`` seed's run, or continue an unfinished one (``resume``), its log in
+    ``out_dir/<method>-s<seed>.log``; a ``trained`` seed has nothing left to train."""
+    if state not in ("new", "resume"):
+        return
+    seed = cfg.train.seed
+    try:
+        train_logged(cfg, out_dir / f"{method}-s{seed}.log", label=f"train {method} seed {seed}",
+                     resume=state == "resume")
+    except RuntimeError as exc:  # failed, or stopped (Ctrl-C, SIGTERM) with its checkpoints
+        raise SystemExit(f"seed {seed}: {exc}; the same command again continues it") from None
+
+
 def run_seed(cfg: RunConfig, state: str, args: argparse.Namespace, out_dir: Path, road: str) -> dict:
     """Train (or continue) one seed's run, evaluate its final network on the test episodes, write
     and return its ``<method>-s<seed>.json``."""
     seed, method = cfg.train.seed, args.method
     run_dir = Path(cfg.train.run_dir)
     started = time.monotonic()
-    if state in ("new", "resume"):
-        try:
-            train_logged(cfg, out_dir / f"{method}-s{seed}.log", label=f"train {method} seed {seed}",
-                         resume=state == "resume")
-        except RuntimeError as exc:  # failed, or stopped (Ctrl-C, SIGTERM) with its checkpoints
-            raise SystemExit(f"seed {seed}: {exc}; the same command again continues it") from None
+    train_seed(cfg, state, out_dir, method)
     greedy = load_greedy_policy(run_dir / "checkpoints" / "final.safetensors")
     test_env = dataclasses.replace(cfg.env, max_steps=args.eval_max_steps)
     by_road = None
