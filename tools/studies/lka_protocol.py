@@ -27,19 +27,18 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import shlex
-import shutil
 import time
 from pathlib import Path
 
 import yaml
 
-from laneshift.config import METHODS, ConfigError, EnvConfig, RunConfig, load_run_config, method_settings
+from laneshift.config import METHODS, ConfigError, EnvConfig, RunConfig, load_run_config
 from laneshift.progress import progress, write
-from laneshift.tools.argtypes import add_set_arg, parse_set, positive_int, seed_list
+from laneshift.tools.argtypes import add_set_arg, parse_set, positive_int
 from laneshift.tools.studies.evaluate import evaluate_policy, load_greedy_policy, lka_response, plot_lka_response
-from laneshift.tools.studies.protocol import seed_state, train_seed
+from laneshift.tools.studies.protocol import checked_seeds, seed_state, train_seed
+from laneshift.tools.studies.protocol_publish import publish_final
 from laneshift.tools.studies.protocol_results import TEST_SEED
 from laneshift.tools.studies.provenance import command_line, git_revision, write_json
 from laneshift.tools.studies.runs import method_config
@@ -56,10 +55,7 @@ def plan(args: argparse.Namespace) -> tuple[Path, dict[int, RunConfig], dict[int
     """(out dir, each seed's config, each seed's state); every config is built, and a bad method,
     seed or --set refused, before the first run starts."""
     user = parse_set(args.set)
-    method_settings(args.method, "--method")
-    seeds = seed_list(args.seeds)
-    if len(set(seeds)) != len(seeds):
-        raise ConfigError(f"--seeds: a seed is named twice in {args.seeds!r}")
+    seeds = checked_seeds(args)
     base = load_run_config(args.config, {"env.scenario": ROAD, "actor.workers": args.workers, **user})
     if base.env.scenario != ROAD:
         raise ConfigError(f"env.scenario: the LKA protocol runs on the lka plant, not {base.env.scenario!r}")
@@ -165,26 +161,11 @@ def publish(results: dict, dest: Path) -> list[Path]:
     dest.mkdir(parents=True, exist_ok=True)
     written = []
     for run in results["runs"]:
-        final = Path(run["run_dir"]) / "checkpoints" / "final.safetensors"
-        if not final.is_file():
-            write(f"lka: publish: seed {run['seed']}: {final} is gone; not published")
-            continue
-        stem = f"{ROAD}-{results['method']}-seed{run['seed']}-final"
-        checkpoint = dest / f"{stem}.safetensors"
-        shutil.copyfile(final, checkpoint)
         e = run["eval"]
-        doc = {"checkpoint": checkpoint.name, "road": ROAD, "method": results["method"], "seed": run["seed"],
-               "command": command_line(), "cwd": os.getcwd(), "git": git_revision(),
-               "trained_by": {"command": run.get("command"), "git": run.get("git")},
-               "env_steps": run["env_steps"], "run_dir": run["run_dir"],
-               "test": {"episode_seed": TEST_SEED, "episodes": e["episodes"],
-                        "return_mean": e["return_mean"], "return_std": e["return_std"],
-                        "survival_rate": e["survival_rate"], "response": run["response"],
-                        "command": eval_command(checkpoint, e["episodes"])},
-               "config": run["config"]}
-        write_json(dest / f"{stem}.json", doc)
-        written += [checkpoint, dest / f"{stem}.json"]
-        write(f"lka: published {checkpoint} and {stem}.json")
+        written += publish_final(run, dest, ROAD, results["method"], "lka", lambda checkpoint, e=e, run=run: {
+            "test": {"episode_seed": TEST_SEED, "episodes": e["episodes"], "return_mean": e["return_mean"],
+                     "return_std": e["return_std"], "survival_rate": e["survival_rate"],
+                     "response": run["response"], "command": eval_command(checkpoint, e["episodes"])}})
     return written
 
 

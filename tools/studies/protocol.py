@@ -89,15 +89,22 @@ def seed_state(run_dir: Path, record: Path) -> str:
     return "trained" if ended == "done" and (run_dir / "checkpoints" / "final.safetensors").is_file() else "resume"
 
 
+def checked_seeds(args: argparse.Namespace) -> list[int]:
+    """``--seeds`` as a list, once ``--method`` is known to name a method and no seed is named twice
+    (ConfigError otherwise)."""
+    method_settings(args.method, "--method")
+    seeds = seed_list(args.seeds)
+    if len(set(seeds)) != len(seeds):
+        raise ConfigError(f"--seeds: a seed is named twice in {args.seeds!r}")
+    return seeds
+
+
 def plan(args: argparse.Namespace) -> tuple[Path, str, dict[int, RunConfig], dict[int, str]]:
     """(out dir, road, each seed's config, each seed's state): every config is built (and a bad
     method, seed or --set refused) before the first run starts. A seed whose run stopped unfinished
     gets its saved config with this command's settings on top (as ``laneshift train --resume``)."""
     user = parse_set(args.set)
-    method_settings(args.method, "--method")
-    seeds = seed_list(args.seeds)
-    if len(set(seeds)) != len(seeds):
-        raise ConfigError(f"--seeds: a seed is named twice in {args.seeds!r}")
+    seeds = checked_seeds(args)
     if TEST_SEED + args.test_episodes > VALIDATION_SEED:
         raise ConfigError(f"--test-episodes: at most {VALIDATION_SEED - TEST_SEED:,} (the test episodes' seeds "
                           f"from {TEST_SEED:,} would reach the validation episodes' from {VALIDATION_SEED:,})")

@@ -14,6 +14,7 @@ import os
 import shlex
 import shutil
 from pathlib import Path
+from typing import Callable
 
 from laneshift.config import EnvConfig
 from laneshift.progress import write
@@ -48,6 +49,30 @@ def published_rates(checkpoint: Path, env: dict, test: dict, evals: dict[str, di
             for lane, e in evals.items()}
 
 
+def publish_final(run: dict, dest: Path, road: str, method: str, label: str,
+                  tested: Callable[[Path], dict]) -> list[Path]:
+    """One seed's final network as ``dest/<road>-<method>-seed<N>-final.safetensors`` and a ``.json``
+    beside it: its provenance (this command, the training's command and revision, the resolved
+    config) around ``tested(checkpoint)``, the protocol's own test table. The files written; none
+    if the run's final network is gone (said on a line starting with ``label``)."""
+    seed = run["seed"]
+    final = Path(run["run_dir"]) / "checkpoints" / "final.safetensors"
+    if not final.is_file():
+        write(f"{label}: publish: seed {seed}: {final} is gone; not published")
+        return []
+    dest.mkdir(parents=True, exist_ok=True)
+    stem = f"{road}-{method}-seed{seed}-final"
+    checkpoint = dest / f"{stem}.safetensors"
+    shutil.copyfile(final, checkpoint)
+    doc = {"checkpoint": checkpoint.name, "road": road, "method": method, "seed": seed,
+           "command": command_line(), "cwd": os.getcwd(), "git": git_revision(),
+           "trained_by": {"command": run.get("command"), "git": run.get("git")},
+           "env_steps": run["env_steps"], "run_dir": run["run_dir"], **tested(checkpoint), "config": run["config"]}
+    write_json(dest / f"{stem}.json", doc)
+    write(f"{label}: published {checkpoint} and {stem}.json")
+    return [checkpoint, dest / f"{stem}.json"]
+
+
 def publish(results: dict, dest: Path, road: str) -> list[Path]:
     """Each seed's final network as ``dest/<road>-<method>-seed<N>-final.safetensors`` with its
     provenance and test table beside it (``.json``); allroads: the four roads pooled in ``lanes``
@@ -56,33 +81,23 @@ def publish(results: dict, dest: Path, road: str) -> list[Path]:
     dest.mkdir(parents=True, exist_ok=True)
     method, written = results["method"], []
     for run in results["methods"][method]["runs"]:
-        seed = run["seed"]
-        final = Path(run["run_dir"]) / "checkpoints" / "final.safetensors"
-        if not final.is_file():
-            write(f"protocol: publish: seed {seed}: {final} is gone; not published")
-            continue
-        stem = f"{road}-{method}-seed{seed}-final"
-        checkpoint = dest / f"{stem}.safetensors"
-        shutil.copyfile(final, checkpoint)
-        test = run["test"]
-        env = run["config"]["env"]
-        by_road = run.get("eval_by_road")
-        if by_road is None:
-            lanes = published_rates(checkpoint, env, test, run["eval"])
-            roads = {}
-        else:
-            roads = {"roads": {r: published_rates(checkpoint, {**env, "road": r}, test, e) for r, e in by_road.items()}}
-            lanes = {lane: {k: e.get(k) for k in ("survival_rate", "achievement_rate", "episodes", "survival_ci95",
-                                                  "achievement_ci95")} | {"pooled_over": list(by_road)}
-                     for lane, e in run["eval"].items()}
-        doc = {"checkpoint": checkpoint.name, "road": road, "method": method, "seed": seed,
-               "command": command_line(), "cwd": os.getcwd(), "git": git_revision(),
-               "trained_by": {"command": run.get("command"), "git": run.get("git")},
-               "env_steps": run["env_steps"], "run_dir": run["run_dir"],
-               "test": {"episode_seed": test["episode_seed"], "episodes_per_lane": test["episodes_per_lane"],
-                        "max_steps": test["max_steps"], "lanes": lanes, **roads},
-               "validation": run["validation"], "config": run["config"]}
-        write_json(dest / f"{stem}.json", doc)
-        written += [checkpoint, dest / f"{stem}.json"]
-        write(f"protocol: published {checkpoint} and {stem}.json")
+        written += publish_final(run, dest, road, method, "protocol", lambda checkpoint, run=run: {
+            "test": _test_table(checkpoint, run), "validation": run["validation"]})
     return written
+
+
+def _test_table(checkpoint: Path, run: dict) -> dict:
+    """A published JSON's ``test``: the test episodes and their rates per initial lane (allroads:
+    pooled, and per road), each with the ``laneshift eval`` command that reproduces it."""
+    test, env = run["test"], run["config"]["env"]
+    by_road = run.get("eval_by_road")
+    if by_road is None:
+        lanes = published_rates(checkpoint, env, test, run["eval"])
+        roads = {}
+    else:
+        roads = {"roads": {r: published_rates(checkpoint, {**env, "road": r}, test, e) for r, e in by_road.items()}}
+        lanes = {lane: {k: e.get(k) for k in ("survival_rate", "achievement_rate", "episodes", "survival_ci95",
+                                              "achievement_ci95")} | {"pooled_over": list(by_road)}
+                 for lane, e in run["eval"].items()}
+    return {"episode_seed": test["episode_seed"], "episodes_per_lane": test["episodes_per_lane"],
+            "max_steps": test["max_steps"], "lanes": lanes, **roads}
