@@ -52,6 +52,10 @@ def test_lka_protocol_trains_tests_publishes_and_skips_a_finished_seed(tmp_path,
     assert cli.main(argv) == 0
     assert f"lka: matlab-dqn seed 0: done ({out / 'matlab-dqn-s0.json'}), skipped" in capsys.readouterr().out
     assert json.loads((out / "results.json").read_text())["runs"] == [run]
+    # Another budget in the same --out: refused before anything runs, naming the difference.
+    other = [("2000" if a == "1500" else a) for a in argv]
+    assert cli.main(other) == 2
+    assert "is of another protocol (env_steps 1500 there, 2000 now)" in capsys.readouterr().err
 
 
 def test_lka_protocol_refuses_another_plant_and_bad_seeds_before_any_run(tmp_path, capsys):

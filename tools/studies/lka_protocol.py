@@ -37,7 +37,7 @@ from laneshift.config import METHODS, ConfigError, EnvConfig, RunConfig, load_ru
 from laneshift.progress import progress, write
 from laneshift.tools.argtypes import add_set_arg, parse_set, positive_int
 from laneshift.tools.studies.evaluate import evaluate_policy, load_greedy_policy, lka_response, plot_lka_response
-from laneshift.tools.studies.protocol import checked_seeds, seed_state, train_seed
+from laneshift.tools.studies.protocol import check_same_protocol, checked_seeds, seed_state, train_seed
 from laneshift.tools.studies.protocol_publish import publish_final
 from laneshift.tools.studies.protocol_results import TEST_SEED
 from laneshift.tools.studies.provenance import command_line, git_revision, write_json
@@ -63,10 +63,18 @@ def plan(args: argparse.Namespace) -> tuple[Path, dict[int, RunConfig], dict[int
     configs, states = {}, {}
     for seed in seeds:
         run_dir = out_dir / f"{args.method}-s{seed}"
-        states[seed] = seed_state(run_dir, out_dir / f"{args.method}-s{seed}.json")
+        record = out_dir / f"{args.method}-s{seed}.json"
+        states[seed] = seed_state(run_dir, record)
+        if states[seed] == "done":
+            check_same_protocol(seed, record, test_section(args), args.env_steps)
         seed_base = load_run_config(run_dir / "config.yaml", {"env.scenario": ROAD}) if states[seed] == "resume" else base
         configs[seed] = method_config(seed_base, args.method, seed, run_dir, args.env_steps, user)
     return out_dir, configs, states
+
+
+def test_section(args: argparse.Namespace) -> dict:
+    """A seed record's ``test``: the test episodes."""
+    return {"episode_seed": TEST_SEED, "episodes": args.test_episodes}
 
 
 def test_drive(make_policy, env_cfg: EnvConfig, episodes: int, label: str, png: Path) -> dict:
@@ -93,7 +101,7 @@ def run_seed(cfg: RunConfig, state: str, args: argparse.Namespace, out_dir: Path
     record = {"seed": seed, "method": method, "road": ROAD, "run_dir": str(run_dir), "resumed": state == "resume",
               "wall_s": round(time.monotonic() - started, 1), "train_wall_s": summary.get("wall_s"),
               "env_steps": summary.get("env_steps") or cfg.train.env_steps,
-              "test": {"episode_seed": TEST_SEED, "episodes": args.test_episodes}, **tested,
+              "test": test_section(args), **tested,
               "command": command_line(), "git": git_revision(),
               "config": yaml.safe_load((run_dir / "config.yaml").read_text())}
     write_json(out_dir / f"{method}-s{seed}.json", record)

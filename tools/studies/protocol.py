@@ -89,6 +89,22 @@ def seed_state(run_dir: Path, record: Path) -> str:
     return "trained" if ended == "done" and (run_dir / "checkpoints" / "final.safetensors").is_file() else "resume"
 
 
+def check_same_protocol(seed: int, record: Path, test: dict, env_steps: int) -> None:
+    """A finished seed joins a study only if it is of the same protocol: its record's test episodes
+    and budget are this command's (ConfigError naming what differs otherwise)."""
+    try:
+        kept = json.loads(record.read_text())
+        differ = {"test": (kept["test"], test), "env_steps": (kept["config"]["train"]["env_steps"], env_steps)}
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ConfigError(f"seed {seed}: {record} is not readable ({exc}); remove it to evaluate the "
+                          f"seed again") from None
+    differ = {k: v for k, v in differ.items() if v[0] != v[1]}
+    if differ:
+        raise ConfigError(f"seed {seed}: {record} is of another protocol ("
+                          + ", ".join(f"{k} {v[0]} there, {v[1]} now" for k, v in differ.items())
+                          + "); choose another --out, or remove it to evaluate the seed again")
+
+
 def checked_seeds(args: argparse.Namespace) -> list[int]:
     """``--seeds`` as a list, once ``--method`` is known to name a method and no seed is named twice
     (ConfigError otherwise)."""
@@ -131,19 +147,8 @@ def plan(args: argparse.Namespace) -> tuple[Path, str, dict[int, RunConfig], dic
     for seed in seeds:
         run_dir, record = out_dir / f"{args.method}-s{seed}", out_dir / f"{args.method}-s{seed}.json"
         states[seed] = seed_state(run_dir, record)
-        if states[seed] == "done":  # a finished seed joins this study only if it is of the same protocol
-            try:
-                kept = json.loads(record.read_text())
-                differ = {"test": (kept["test"], test), "env_steps": (kept["config"]["train"]["env_steps"],
-                                                                      args.env_steps)}
-            except (OSError, ValueError, KeyError, TypeError) as exc:
-                raise ConfigError(f"seed {seed}: {record} is not readable ({exc}); remove it to evaluate the "
-                                  f"seed again") from None
-            differ = {k: v for k, v in differ.items() if v[0] != v[1]}
-            if differ:
-                raise ConfigError(f"seed {seed}: {record} is of another protocol ("
-                                  + ", ".join(f"{k} {v[0]} there, {v[1]} now" for k, v in differ.items())
-                                  + "); choose another --out, or remove it to evaluate the seed again")
+        if states[seed] == "done":
+            check_same_protocol(seed, record, test, args.env_steps)
         seed_base = base
         if states[seed] == "resume":
             try:
