@@ -27,7 +27,7 @@ import gymnasium as gym
 import numpy as np
 
 from laneshift.config import EnvConfig
-from laneshift.envspec import ALLROADS, LAYOUT_OPTIONS, SCENARIOS
+from laneshift.envspec import ALLROADS, RECORDED_ENV_OPTIONS, SCENARIOS
 from laneshift.progress import progress as progress_bar
 
 from .envs import make as make_env
@@ -83,7 +83,7 @@ def evaluate_policy(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig
     if isinstance(policy, GreedyPolicy) and env_cfg.policy_vehicles:
         # The paper's third kind of vehicle: traffic driven by a copy of the model under test.
         env.unwrapped.set_npc_policy(policy.batch)
-    returns, lengths, survived, achieved = [], [], 0, 0
+    returns, lengths, survived, achieved, shielded = [], [], 0, 0, 0
     # How the lane-change episodes that crashed ended: "collision" or "offroad", by starting lane.
     crashes: dict[str, dict[str, int]] = {}
     try:
@@ -99,6 +99,7 @@ def evaluate_policy(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig
                 obs, reward, terminated, truncated, info = env.step(int(policy(obs)))
                 total += float(reward)
                 steps += 1
+                shielded += bool(info.get("shielded", False))
                 done = terminated or truncated
                 if recording:
                     recorder.frame(ep, steps, env, done)  # type: ignore[union-attr]
@@ -122,6 +123,8 @@ def evaluate_policy(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig
     if not env_cfg.is_lka:
         result.update(achievement_rate=achieved / episodes, achievement_ci95=wilson_ci95(achieved, episodes),
                       crashes=crashes)
+    if env_cfg.shield:  # how often the safety shield replaced the policy's action
+        result["shielded_step_rate"] = shielded / max(1, sum(lengths))
     return result
 
 
@@ -182,9 +185,10 @@ def load_greedy_policy(checkpoint: str | Path) -> GreedyPolicy:
 def checkpoint_env_settings(meta: Mapping[str, str]) -> dict[str, str]:
     """The env a checkpoint was trained on, as far as its metadata tells, as EnvConfig fields:
     ``observation`` (stacked frames, a 3-d uint8 ``obs_shape``: grayscale; a 1-d one: vector) and
-    ``scenario`` (its ``env_id``, when it is one of the scenarios), and the layout options
-    (``LAYOUT_OPTIONS``) the run set. Whatever it does not tell is left out (a checkpoint written
-    before the learner recorded the layout options: the error names the option that fits).
+    ``scenario`` (its ``env_id``, when it is one of the scenarios), and the options an evaluation
+    must repeat (``RECORDED_ENV_OPTIONS``: the layout's, the shield) that the run set. Whatever it does
+    not tell is left out (a checkpoint written before the learner recorded the layout options: the
+    error names the option that fits).
 
     >>> checkpoint_env_settings({"obs_shape": "4,100,100", "obs_dtype": "|u1",
     ...                          "env_id": "laneshift/MergeLaneChange-v0"})
@@ -203,7 +207,7 @@ def checkpoint_env_settings(meta: Mapping[str, str]) -> dict[str, str]:
     scenario = {env_id: name for name, env_id in SCENARIOS.items()}.get(str(meta.get("env_id", "")))
     if scenario is not None:
         out["scenario"] = scenario
-    for option in LAYOUT_OPTIONS:  # written by the learner where the run set them ("0" / "1")
+    for option in RECORDED_ENV_OPTIONS:  # written by the learner where the run set them ("0" / "1")
         if str(meta.get(option, "")) in ("0", "1"):
             out[option] = meta[option] == "1"
     return out
@@ -245,6 +249,8 @@ def format_result(r: dict) -> str:
             f"length {r['length_mean']:.1f}, survival {r['survival_rate']:.0%}")
     if "achievement_rate" in r:
         text += f", achievement {r['achievement_rate']:.0%}"
+    if "shielded_step_rate" in r:
+        text += f", the shield replaced {r['shielded_step_rate']:.1%} of the actions"
     agree = r.get("demo_agreement")
     if agree:
         text += (f"\n  demonstrator's action on {agree['agreement']:.0%} of {agree['states']:,} demo states"

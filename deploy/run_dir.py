@@ -133,7 +133,8 @@ def default_demo_dir(cfg: RunConfig, episodes: int) -> Path:
     # The observation's shape is in the name: a layout change makes a new shard, not a refusal.
     shape = "x".join(str(d) for d in spec_of(env).schema.obs_shape)
     scenario = env.scenario.replace('/', '_') + (f"-{env.road}" if env.road else "")  # allroads pinned to one road
-    name = f"{scenario}-{env.observation}{shape}-p{env.reward_preset}-scripted-v{ScriptedDriver.VERSION}-{episodes}ep"
+    shield = "-shield" if env.shield else ""  # the driver drove behind the shield
+    name = f"{scenario}-{env.observation}{shape}-p{env.reward_preset}{shield}-scripted-v{ScriptedDriver.VERSION}-{episodes}ep"
     return Path(cfg.train.run_dir).resolve().parent / "demos" / name
 
 

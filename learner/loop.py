@@ -40,7 +40,7 @@ import torch
 
 from laneshift import wire
 from laneshift.config import RunConfig, worker_names
-from laneshift.envspec import LAYOUT_OPTIONS, EnvSpec
+from laneshift.envspec import RECORDED_ENV_OPTIONS, EnvSpec
 from laneshift.qnet import weights_of
 
 from .batches import retry_delay, sample_or_wait, split_updates
@@ -182,9 +182,9 @@ class Learner:
                 "obs_dtype": self.spec.schema.obs_dtype, "n_actions": self.spec.schema.n_actions,
                 "hidden": ",".join(map(str, self.lcfg.hidden)), "dueling": int(self.lcfg.dueling), "cnn": self.lcfg.cnn,
                 "env_steps": self.episodes.env_steps, "elapsed_s": round(time.monotonic() - self.started, 1)}
-        # The observation layout's options where the run set them, so `laneshift eval` builds the
-        # env this network reads without being told (checkpoint_env_settings).
-        meta.update({key: int(value) for key, value in self.spec.env_kwargs if key in LAYOUT_OPTIONS})
+        # The observation layout's options and the shield where the run set them, so `laneshift eval`
+        # builds the env this network was trained in without being told (checkpoint_env_settings).
+        meta.update({key: int(value) for key, value in self.spec.env_kwargs if key in RECORDED_ENV_OPTIONS})
         return self.files.save_policy(self.agent.policy_net, name, meta)
 
     # ------------------------------------------------------------------ main loop

@@ -35,11 +35,13 @@ from highway_env.vehicle.kinematics import Vehicle
 
 from . import scenarios
 from .actions import META_ACTIONS, paper_actions
+from .control import lane_errors
 from .driving import Driving
 from .lanes import LaneQueries
 from .observations import OBS_LIMIT, vector_observation, vector_size
 from .policy_vehicles import NpcPolicy, PolicyVehicles
 from .rendering import TopDownRenderer
+from .shield import GapShield, ShieldView
 from .rewards import DEFAULT_REWARD_PRESET, REWARD_TERM_NAMES, compute_reward, get_preset, motion_flags
 from .traffic import AgentVehicle, Traffic, collisions, locate
 
@@ -95,6 +97,7 @@ class LaneChangeEnv(LaneQueries, Driving, PolicyVehicles, gym.Env):
         vehicles_observed: int = 8,
         lane_features: bool = True,
         alongside_features: bool = False,
+        shield: bool = False,
         speed_step: float = 0.1,
         curvature_step: float = 0.01,
         ego_speed_spread: float = 2.0,
@@ -156,6 +159,11 @@ class LaneChangeEnv(LaneQueries, Driving, PolicyVehicles, gym.Env):
         if alongside_features and not lane_features:
             raise ValueError("alongside_features extends the lane features: it needs lane_features=True")
         self.alongside_features = bool(alongside_features)
+        if not isinstance(shield, (bool, np.bool_)):
+            raise ValueError(f"shield must be True or False, got {shield!r}")
+        if shield and action_set != "paper":
+            raise ValueError("shield guards the paper action set (action_set='paper')")
+        self.shield = bool(shield)
         self.speed_step = _float_arg("speed_step", speed_step, 0.0)
         self.curvature_step = _float_arg("curvature_step", curvature_step, 0.0, 2.0 / Vehicle.LENGTH)
         self.ego_speed_spread = _float_arg("ego_speed_spread", ego_speed_spread, 0.0)
@@ -175,6 +183,8 @@ class LaneChangeEnv(LaneQueries, Driving, PolicyVehicles, gym.Env):
         self.render_mode = render_mode
         self.observation_type = observation
         self.action_set = action_set
+        self.gap_shield = GapShield(self.speed_step, self.curvature_step, 1.0 / self.policy_frequency,
+                                    AgentVehicle.LENGTH) if self.shield else None
 
         # ---- spaces ---------------------------------------------------------------------------
         self.actions = paper_actions(self.speed_step, self.curvature_step)
@@ -296,7 +306,8 @@ class LaneChangeEnv(LaneQueries, Driving, PolicyVehicles, gym.Env):
         if not 0 <= a < self.action_space.n:
             raise ValueError(f"action must be in [0, {self.action_space.n}), got {action!r}")
         agent_actions = self._policy_actions()
-        self._command(self.ego, a)
+        executed = a if self.gap_shield is None else self.gap_shield.safe_action(a, self._shield_view())
+        self._command(self.ego, executed)
         for agent, act in zip(self.agents, agent_actions):
             if agent.active:
                 self._command(agent, int(act))
@@ -336,6 +347,8 @@ class LaneChangeEnv(LaneQueries, Driving, PolicyVehicles, gym.Env):
         terminated = crashed
         truncated = (not terminated) and self.steps >= self.max_steps
         info = self._info(crashed=crashed, collided=collided, terms=terms, offroad=offroad)
+        if self.gap_shield is not None:
+            info["shielded"] = executed != a  # the shield replaced this step's action
         return obs, reward, terminated, truncated, info
 
     def render(self) -> np.ndarray | None:
@@ -366,6 +379,13 @@ class LaneChangeEnv(LaneQueries, Driving, PolicyVehicles, gym.Env):
             np.concatenate([t.speed, [a.speed for a in extra]]),
             np.concatenate([t.lane, [a.loc.lane for a in extra]]),
         )
+
+    def _shield_view(self) -> ShieldView:
+        e = self.ego
+        offset, rel, curvature = lane_errors(e.loc, e.loc.lane, e.heading)
+        slots = self.lane_slots(e)
+        return ShieldView(e.speed, offset, rel, curvature, e.loc.lane_end, self.layout.paths[e.loc.lane].width,
+                          (slots[0], slots[1], slots[2]))
 
     def _vector_obs(self, v: AgentVehicle) -> np.ndarray:
         ox, oy, oh, ov, ol = self._others(v)

@@ -70,17 +70,23 @@ class LaneQueries:
         lane = v.loc.lane + side
         return lane if self.lanes_adjacent(v.loc, v.loc.lane, lane) else None
 
-    def _lane_features(self, v: AgentVehicle) -> np.ndarray:
+    def lane_slots(self, v: AgentVehicle) -> list[tuple[float, float, float, float] | None]:
+        """For ``v``'s current, left and right lane (None where the road has none): gap ahead, its
+        speed minus ``v``'s forward speed, gap behind, its speed minus ``v``'s (bumper to bumper [m];
+        ``inf`` when nobody is there). What the lane block of the observation (and the shield) read."""
         loc = v.loc
         forward = v.speed * math.cos(v.heading - loc.heading[loc.lane])
-        slots = []
+        slots: list[tuple[float, float, float, float] | None] = []
         for lane in (loc.lane, self.adjacent_lane(v, -1), self.adjacent_lane(v, +1)):
             if lane is None:
                 slots.append(None)
                 continue
             front, v_front, rear, v_rear = self.lane_neighbours(v, lane)
             slots.append((front, v_front - forward, rear, v_rear - forward))
-        return lane_block(slots, self.alongside_features)
+        return slots
+
+    def _lane_features(self, v: AgentVehicle) -> np.ndarray:
+        return lane_block(self.lane_slots(v), self.alongside_features)
 
     def lane_gap(self, lane: int, s_from: float, s_to: float | np.ndarray) -> float | np.ndarray:
         """Signed arc-length difference s_to - s_from on ``lane`` (wrapped on rings); ``s_to`` may

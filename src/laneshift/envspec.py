@@ -23,9 +23,11 @@ from .config import EnvConfig
 from .wire import TransitionSchema
 
 
-#: The env options that change the vector observation's layout (EnvConfig fields of the same names).
-#: A learner checkpoint's metadata carries those the run set, so an evaluation can build the same env.
-LAYOUT_OPTIONS = ("lane_features", "alongside_features")
+#: The env options a network was trained with that an evaluation must repeat (EnvConfig fields of the
+#: same names): those that change the vector observation's layout, and the shield, which changes what
+#: an action does. A learner checkpoint's metadata carries those the run set, so an evaluation can
+#: build the same env.
+RECORDED_ENV_OPTIONS = ("lane_features", "alongside_features", "shield")
 
 #: Scenario name -> gymnasium id (registered by importing ``laneshift.actors.envs``).
 SCENARIOS: dict[str, str] = {

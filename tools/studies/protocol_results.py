@@ -39,8 +39,9 @@ def drive_baselines(env_cfg: EnvConfig, episodes: int, out_dir: Path,
     from laneshift.actors.envs.demonstrator import ScriptedDriver
 
     env = dataclasses.asdict(env_cfg)
-    if not env["road"]:  # the key of the files written before env.road existed, which stay valid
-        del env["road"]
+    for later in ("road", "shield"):  # the key of the files written before these existed, which stay valid
+        if not env[later]:
+            del env[later]
     key = json.loads(json.dumps({"env": env, "episodes": episodes, "episode_seed": TEST_SEED}))
     path = out_dir / filename
     if path.is_file():

@@ -35,6 +35,9 @@ class EnvConfig:
     lane_features: bool = True
     # Per lane slot: a car alongside (1/0) and the nearest bumper gap at 10 m scale (needs lane_features)
     alongside_features: bool = False
+    # A safety shield before each step (actors/envs/shield.py): an action a gap rule on what the lane
+    # block sees calls unsafe is replaced by a safe one (paper action set). Recorded in checkpoints.
+    shield: bool = False
     # allroads only: "" = each episode's road is drawn from its reset seed (seed % 4: straight, merge,
     # curve, roundabout); a road's name = every episode on that road (to test one road)
     road: str = ""
@@ -52,6 +55,8 @@ class EnvConfig:
                f"(env.scenario is {self.scenario!r})", self.road)
         _check(self.lane_features or not self.alongside_features, "env.alongside_features",
                "extends the lane features: it needs env.lane_features=true", self.alongside_features)
+        _check(not (self.shield and (self.is_lka or self.action_set != "paper")), "env.shield",
+               "guards the lane changes of the paper action set (not lka, not action_set=meta)", self.shield)
         _check(not (self.is_allroads and self.observation == "grayscale"), "env.observation",
                "allroads needs the vector observation (the road's one-hot is appended to it; a frame has "
                "no place for it)", self.observation)
@@ -78,6 +83,8 @@ class EnvConfig:
             kw["lane_features"] = False
         if self.alongside_features:
             kw["alongside_features"] = True
+        if self.shield:
+            kw["shield"] = True
         if self.road:
             kw["road"] = self.road
         return kw
