@@ -15,7 +15,12 @@ is the driver's, so the rows are ordinary demonstrations to the replay server an
 An episode the network ends (a crash, or the step limit) before step ``k`` records nothing; the
 metadata counts them (``roll_in_ended``) beside each recorded episode's ``roll_in_steps``.
 
-Room: the tools (demo tools). May import: anything in laneshift.
+Measured (docs/RESULTS.md, "behind a safety shield"): worse than without it on merge's validation
+episodes, so it stayed a probe. Run by path::
+
+    python rollin_shard.py CHECKPOINT OUT_DIR EPISODES SEED [MAX_ROLL_IN_STEPS]
+
+Room: a diagnostic script beside its results (run by path, not installed). May import: laneshift.
 """
 
 from __future__ import annotations
@@ -29,8 +34,8 @@ import numpy as np
 
 from laneshift.demos.envsupport import make_env, resolve_env_id
 from laneshift.progress import progress as progress_bar
-from .drivers import Driver, scripted_driver
-from .writer import check_out_dir, write_shard
+from laneshift.tools.demos.drivers import Driver, scripted_driver
+from laneshift.tools.demos.writer import check_out_dir, write_shard
 
 
 def _drive_tail(env: Any, obs: Any, info: dict, driver: Driver) -> dict[str, Any]:
@@ -122,3 +127,18 @@ def _sha256(path: str | os.PathLike) -> str:
     import hashlib
 
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+if __name__ == "__main__":
+    import sys
+
+    from laneshift.demos.shard import read_metadata
+
+    ckpt, out, n, first = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
+    longest = int(sys.argv[5]) if len(sys.argv) > 5 else 150
+    kwargs = {"observation": "vector", "reward_preset": 5, "initial_lane": "random", "action_set": "paper",
+              "max_steps": 300, "alongside_features": True}  # the merge protocol's demo shard's env
+    meta = read_metadata(generate_rollin_shard(out, checkpoint=ckpt, env_id_or_scenario="merge", env_kwargs=kwargs,
+                                               episodes=n, seed=first, roll_in_steps=(0, longest)))
+    print({k: meta.get(k) for k in ("episodes", "steps", "survival_rate", "achievement_rate")},
+          "ended in the roll-in:", meta["roll_in"]["ended_in_roll_in"])
