@@ -38,6 +38,12 @@ def scripted_driver(env: gym.Env) -> Driver:
 def run_episode(env: gym.Env, driver: Driver, seed: int | None) -> dict[str, Any]:
     """Drive one episode to its end and return it in ``write_shard``'s episode format."""
     obs, info = env.reset(seed=seed)
+    return drive_to_end(env, driver, obs, info)
+
+
+def drive_to_end(env: gym.Env, driver: Driver, obs: Any, info: dict) -> dict[str, Any]:
+    """Let ``driver`` drive from ``obs`` (with its ``info``) to the episode's end; the part driven,
+    in ``write_shard``'s episode format."""
     # Copies: highway-env returns the same (mutated) array object every step.
     observations = [np.array(obs, copy=True)]
     actions, rewards, terminations, truncations, infos = [], [], [], [], [info]

@@ -28,34 +28,13 @@ from __future__ import annotations
 import os
 import time
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from laneshift.demos.envsupport import make_env, resolve_env_id
 from laneshift.progress import progress as progress_bar
-from laneshift.tools.demos.drivers import Driver, scripted_driver
+from laneshift.tools.demos.drivers import drive_to_end, scripted_driver
 from laneshift.tools.demos.writer import check_out_dir, write_shard
-
-
-def _drive_tail(env: Any, obs: Any, info: dict, driver: Driver) -> dict[str, Any]:
-    """Let ``driver`` drive from ``obs`` to the episode's end; ``write_shard``'s episode format."""
-    observations, infos = [np.array(obs, copy=True)], [info]
-    actions, rewards, terminations, truncations = [], [], [], []
-    while True:
-        action = int(driver(obs))
-        obs, reward, terminated, truncated, info = env.step(action)
-        observations.append(np.array(obs, copy=True))
-        actions.append(action)
-        rewards.append(float(reward))
-        terminations.append(bool(terminated))
-        truncations.append(bool(truncated))
-        infos.append(info)
-        if terminated or truncated:
-            break
-    return {"observations": np.stack(observations), "actions": np.asarray(actions, np.int64),
-            "rewards": np.asarray(rewards, np.float64), "terminations": np.asarray(terminations, bool),
-            "truncations": np.asarray(truncations, bool), "infos": infos}
 
 
 def generate_rollin_shard(
@@ -103,7 +82,7 @@ def generate_rollin_shard(
             if done:
                 ended += 1
                 continue
-            recorded.append(_drive_tail(env, obs, info, scripted_driver(env)))  # a fresh driver: no plan yet
+            recorded.append(drive_to_end(env, scripted_driver(env), obs, info))  # a fresh driver: no plan yet
             seeds.append(seed + i)
             steps_in.append(k)
         if not recorded:
