@@ -1,5 +1,7 @@
 """The table of docs/results/shield-at-test/run.sh: per road and initial-lane setting, the mean of
-the three seeds' survival and achievement with a 95 % percentile bootstrap interval over seeds.
+the three seeds' survival and achievement with a 95 % percentile bootstrap interval over seeds
+(``merge-alongside``: merge's dqfd-bc-alongside networks; ``allroads-<road>``: the allroads networks on
+that road; the other rows dqfd-bc-alongside-safe's).
 
 Room: a diagnostic script beside its results (run by path, not installed). May import: laneshift.
 """
@@ -12,7 +14,8 @@ from laneshift.tools.studies.stats import bootstrap_ci
 out = Path(sys.argv[1])
 print("| road | random lane: survival / achievement | non-target lane: survival / achievement | actions replaced |")
 print("|---|---|---|---|")
-for road in ("straight", "merge", "curve", "roundabout"):
+for road in ("straight", "merge", "curve", "roundabout", "merge-alongside",
+             "allroads-straight", "allroads-merge", "allroads-curve", "allroads-roundabout"):
     cells, replaced = [], []
     for lane in ("random", "non-target"):
         runs = [json.loads((out / f"{road}-s{s}-{lane}.json").read_text()) for s in range(3)]
