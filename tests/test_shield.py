@@ -1,6 +1,9 @@
 """The safety shield (``env.shield``, actors/envs/shield.py): the gap rule on hand-made views, and
 in the env (an action it replaces is counted; a reckless driver that crashes without it survives
-behind it; a checkpoint trained behind it is evaluated behind it)."""
+behind it; a checkpoint trained behind it is evaluated behind it).
+
+Room: tests, unit. May import: laneshift (any floor), pytest, the standard library.
+"""
 
 from __future__ import annotations
 
