@@ -68,7 +68,7 @@ METHODS: dict[str, dict[str, Any]] = {
     # what the observation's lane block sees replaces an action that would carry the car into a lane
     # that is not free, or not brake in time for its leader or the end of the merge ramp. The agent
     # is the network and the shield together; the network alone is `--set env.shield=false` at eval.
-    # Chosen on validation episodes: the published networks behind it crashed in 0-3 of 200 episodes
+    # Chosen on validation episodes: the published networks behind it crashed in 0-4 of 200 episodes
     # per setting on every road (docs/RESULTS.md, "behind a safety shield").
     "dqfd-bc-alongside-safe-shield": {**_DQFD, **_ANNEALED_LEARNER, "learner.bc_loss_weight": 1.0,
                                       "env.alongside_features": True, "learner.terminal_value": -1000.0,
