@@ -88,19 +88,19 @@ class GapShield:
         swing = heading * heading / (2 * back)
         return offset + (swing if heading > 0 else 0.0), offset - (swing if heading < 0 else 0.0)
 
-    def curvature_risk(self, view: ShieldView, curvature_idx: int) -> float:
-        """How far [m] this curvature carries the body past where it may go: ``edge`` on a side whose
+    def _bounds(self, view: ShieldView) -> tuple[float, float]:
+        """How far [m] left and right of its lane's centre the body may go: ``edge`` on a side whose
         lane is not free, the far side of a free neighbouring lane (one lane change at a time)."""
-        leftmost, rightmost = self._reach(view, curvature_idx)
         left = self.edge + (view.lane_width if self.lane_free(view.slots[1]) else 0.0)
         right = self.edge + (view.lane_width if self.lane_free(view.slots[2]) else 0.0)
-        return max(0.0, leftmost - left) + max(0.0, -right - rightmost)
+        return left, right
 
-    def forced_speed(self, view: ShieldView, curvature_idx: int) -> int | None:
+    def forced_speed(self, view: ShieldView, reach: tuple[float, float]) -> int | None:
         """SLOWER, FASTER or None (the action's own speed part is safe). It looks at the ego's lane
-        and at a neighbouring lane its body reaches into with this curvature (a lane change)."""
+        and at a neighbouring lane its body reaches into (``reach``: the chosen curvature's
+        (leftmost, rightmost) offsets; a lane change)."""
         lanes = [view.slots[0]]
-        leftmost, rightmost = self._reach(view, curvature_idx)
+        leftmost, rightmost = reach
         if leftmost > self.edge:
             lanes.append(view.slots[1])
         if rightmost < -self.edge:
@@ -127,9 +127,12 @@ class GapShield:
     def safe_action(self, action: int, view: ShieldView) -> int:
         """``action`` (index = 3 * speed + curvature) if the rule calls it safe, else its replacement."""
         speed_idx, curvature_idx = divmod(int(action), 3)
-        risk = [self.curvature_risk(view, c) for c in range(3)]
+        left, right = self._bounds(view)
+        reach = [self._reach(view, c) for c in range(3)]
+        # How far [m] each curvature carries the body past where it may go.
+        risk = [max(0.0, leftmost - left) + max(0.0, -right - rightmost) for leftmost, rightmost in reach]
         if risk[curvature_idx] > 0.0:
             safe = [c for c in (STRAIGHT, LEFT, RIGHT) if risk[c] == 0.0]
             curvature_idx = safe[0] if safe else min(range(3), key=risk.__getitem__)
-        forced = self.forced_speed(view, curvature_idx)
+        forced = self.forced_speed(view, reach[curvature_idx])
         return 3 * (speed_idx if forced is None else forced) + curvature_idx
