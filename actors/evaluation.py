@@ -83,7 +83,7 @@ def evaluate_policy(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig
     if isinstance(policy, GreedyPolicy) and env_cfg.policy_vehicles:
         # The paper's third kind of vehicle: traffic driven by a copy of the model under test.
         env.unwrapped.set_npc_policy(policy.batch)
-    returns, lengths, survived, achieved, shielded = [], [], 0, 0, 0
+    returns, lengths, survived, achieved, shielded, npc_crashes = [], [], 0, 0, 0, 0
     # How the lane-change episodes that crashed ended: "collision" or "offroad", by starting lane.
     crashes: dict[str, dict[str, int]] = {}
     try:
@@ -106,6 +106,7 @@ def evaluate_policy(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig
             crashed = bool(info.get("crashed", terminated))  # LKA: terminated = left the lane
             survived += not crashed
             achieved += (not crashed) and bool(info.get("on_target_lane", False))
+            npc_crashes += int(info.get("policy_vehicle_crashes", 0))
             if recording:
                 recorder.episode_end(ep, seed + ep, steps, {  # type: ignore[union-attr]
                     "start_lane": start_lane, "survived": not crashed,
@@ -125,6 +126,8 @@ def evaluate_policy(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig
                       crashes=crashes)
     if env_cfg.shield:  # how often the safety shield replaced the policy's action
         result["shielded_step_rate"] = shielded / max(1, sum(lengths))
+    if env_cfg.policy_vehicles:  # how safely the copies of the policy drove the traffic
+        result["policy_vehicle_crashes_per_episode"] = npc_crashes / episodes
     return result
 
 
@@ -251,6 +254,8 @@ def format_result(r: dict) -> str:
         text += f", achievement {r['achievement_rate']:.0%}"
     if "shielded_step_rate" in r:
         text += f", the shield replaced {r['shielded_step_rate']:.1%} of the actions"
+    if "policy_vehicle_crashes_per_episode" in r:
+        text += f", {r['policy_vehicle_crashes_per_episode']:.2f} policy-vehicle crashes an episode"
     agree = r.get("demo_agreement")
     if agree:
         text += (f"\n  demonstrator's action on {agree['agreement']:.0%} of {agree['states']:,} demo states"

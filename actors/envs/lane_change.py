@@ -203,6 +203,7 @@ class LaneChangeEnv(LaneQueries, Driving, PolicyVehicles, gym.Env):
         self.road = Road(network=self.layout.network)
         self.ego: AgentVehicle | None = None
         self.agents: list[AgentVehicle] = []
+        self.policy_vehicle_crashes = 0
         self.npc_policy: NpcPolicy | None = None
         self.target_lane = 0
         self.steps = 0
@@ -306,7 +307,7 @@ class LaneChangeEnv(LaneQueries, Driving, PolicyVehicles, gym.Env):
         if not 0 <= a < self.action_space.n:
             raise ValueError(f"action must be in [0, {self.action_space.n}), got {action!r}")
         agent_actions = self._policy_actions()
-        executed = a if self.gap_shield is None else self.gap_shield.safe_action(a, self._shield_view())
+        executed = self._shielded(self.ego, a)
         self._command(self.ego, executed)
         for agent, act in zip(self.agents, agent_actions):
             if agent.active:
@@ -380,12 +381,17 @@ class LaneChangeEnv(LaneQueries, Driving, PolicyVehicles, gym.Env):
             np.concatenate([t.lane, [a.loc.lane for a in extra]]),
         )
 
-    def _shield_view(self) -> ShieldView:
-        e = self.ego
-        offset, rel, curvature = lane_errors(e.loc, e.loc.lane, e.heading)
-        slots = self.lane_slots(e)
-        return ShieldView(e.speed, offset, rel, curvature, e.loc.lane_end, self.layout.paths[e.loc.lane].width,
+    def _shield_view(self, v: AgentVehicle) -> ShieldView:
+        offset, rel, curvature = lane_errors(v.loc, v.loc.lane, v.heading)
+        slots = self.lane_slots(v)
+        return ShieldView(v.speed, offset, rel, curvature, v.loc.lane_end, self.layout.paths[v.loc.lane].width,
                           (slots[0], slots[1], slots[2]))
+
+    def _shielded(self, v: AgentVehicle, action: int) -> int:
+        """What ``v`` executes for ``action``: the shield's replacement where it has one (with
+        ``shield``), else ``action``. The ego vehicle and the policy vehicles driven by the agent's
+        policy (copies of the agent, shield included) go through it."""
+        return action if self.gap_shield is None else self.gap_shield.safe_action(action, self._shield_view(v))
 
     def _vector_obs(self, v: AgentVehicle) -> np.ndarray:
         ox, oy, oh, ov, ol = self._others(v)
@@ -453,6 +459,7 @@ class LaneChangeEnv(LaneQueries, Driving, PolicyVehicles, gym.Env):
             "reward_terms": terms,
             "steps": self.steps,
             "policy_vehicles_active": sum(a.active for a in self.agents),
+            "policy_vehicle_crashes": self.policy_vehicle_crashes,  # this episode's, so far
         }
 
 

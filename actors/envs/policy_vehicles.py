@@ -1,7 +1,8 @@
 """The lane-change env's policy vehicles (``PolicyVehicles``, a base of
 ``lane_change.LaneChangeEnv``): copies of the agent that drive among the constant-speed traffic.
 At reset they replace traffic vehicles away from the ego vehicle; each step they act through the
-function given to ``set_npc_policy`` (on their own vector observations) or keep their lane; one that
+function given to ``set_npc_policy`` (on their own vector observations; behind the env's safety
+shield when it has one, as the ego vehicle) or keep their lane; one that
 crashes or leaves the traffic window comes back on a free spot away from the ego vehicle, or leaves
 the scene when there is none.
 
@@ -28,7 +29,7 @@ POLICY_SPAWN_DISTANCE = 40.0
 class PolicyVehicles:
     """Spawning, acting and respawning of the policy vehicles (the env's ``agents``). Besides the
     state below it uses the env's lane queries (lanes.LaneQueries), its ``_keep_lane_action``
-    (driving.Driving), ``_locate``, ``_vector_obs``, ``action_space`` and ``np_random``."""
+    (driving.Driving), ``_locate``, ``_vector_obs``, ``_shielded``, ``action_space`` and ``np_random``."""
 
     layout: Layout
     traffic: Traffic
@@ -39,10 +40,12 @@ class PolicyVehicles:
     npc_policy: NpcPolicy | None
     lane_speeds: np.ndarray
     min_gap: float
+    policy_vehicle_crashes: int  # this episode's crashes of policy vehicles (each respawned or gone)
 
     def _spawn_policy_vehicles(self, rng: np.random.Generator) -> None:
         """Policy vehicles replace randomly chosen traffic vehicles away from the ego vehicle."""
         self.agents = []
+        self.policy_vehicle_crashes = 0
         if not self.policy_vehicles:
             return
         traffic = self.traffic
@@ -81,7 +84,7 @@ class PolicyVehicles:
             act = int(act)
             if not 0 <= act < self.action_space.n:
                 raise ValueError(f"npc policy returned action {act}, outside [0, {self.action_space.n})")
-            actions[i] = act
+            actions[i] = self._shielded(self.agents[i], act)  # copies of the agent: behind its shield too
         return actions
 
     def _check_agents(self) -> None:
@@ -110,6 +113,7 @@ class PolicyVehicles:
             if not path.closed:
                 rel = a.loc.s[lane] - self.anchor[lane]
                 out = rel < -self.traffic.back or rel > self.traffic.front
+            self.policy_vehicle_crashes += crashed
             if crashed or out:
                 self._respawn(a)
 
