@@ -223,8 +223,11 @@ def _shape_hint(trained: tuple[int, ...], given: tuple[int, ...]) -> str:
         return " (6 floats more: a network trained with env.alongside_features=true; --set env.alongside_features=true)"
     if len(trained) == len(given) == 1 and given[0] - trained[0] == 6:
         return " (6 floats fewer: a network trained without env.alongside_features; drop that setting)"
-    if len(trained) == len(given) == 1 and trained[0] == given[0] + len(ALLROADS):
-        return " (an allroads network: --scenario allroads, with --set env.road=ROAD for one road)"
+    if len(trained) == len(given) == 1 and trained[0] == given[0] + len(ALLROADS):  # as many as the gap features
+        return (" (an allroads network: --scenario allroads, with --set env.road=ROAD for one road; or one trained "
+                "with env.gap_features=true: --set env.gap_features=true)")
+    if len(trained) == len(given) == 1 and given[0] - trained[0] == 4:
+        return " (4 floats fewer: a network trained without env.gap_features; drop that setting)"
     if len(trained) != len(given):  # frames against a vector, or the other way round
         kind = "grayscale" if len(trained) == 3 else "vector"
         return (f" (a {kind} checkpoint: env.observation={kind}, which `laneshift eval` takes from the checkpoint "

@@ -274,7 +274,7 @@ def build_core(cfg: RunConfig, spec: EnvSpec, shard: int = 0) -> ReplayCore:
 #: Env fields added after replay checkpoints were first written, with their defaults: such a field
 #: joins the digest only when a run sets it, so a run started before it existed still resumes
 #: (``laneshift train --resume``) on the version that added it. Add every new env field here.
-ENV_FIELDS_ADDED_LATER: dict[str, object] = {"alongside_features": False, "shield": False}
+ENV_FIELDS_ADDED_LATER: dict[str, object] = {"alongside_features": False, "gap_features": False, "shield": False}
 
 
 def config_digest(cfg: RunConfig, shard: int = 0) -> str:

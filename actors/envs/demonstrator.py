@@ -28,6 +28,7 @@ from .allroads import AllRoadsLaneChangeEnv
 from .control import curvature_index, lane_errors, speed_index
 from .lane_change import LaneChangeEnv
 from .lka import LKA_STEERING_DEG, LaneKeepingAssistEnv, discrete_model
+from .observations import nearest_gap_middle
 
 
 def _road_env(source: gym.Env) -> LaneChangeEnv:
@@ -211,17 +212,7 @@ class ScriptedDriver:
         if s_occ.size == 0:
             return flow
         rel = np.sort([env.lane_gap(lane, ego.loc.s[lane], float(s)) for s in s_occ])
-        edges = np.concatenate([[-np.inf], rel, [np.inf]])
-        need = 2 * (ego.LENGTH + self.buffer) + 4.0
-        best = None
-        for a, b in zip(edges[:-1], edges[1:]):
-            if b - a < need:
-                continue
-            mid = (a + b) / 2 if math.isfinite(a) and math.isfinite(b) else (a + need / 2 if math.isfinite(a) else b - need / 2)
-            if best is None or abs(mid) < abs(best):
-                best = mid
-        if best is None:
-            return flow
+        best = nearest_gap_middle(rel, 2 * (ego.LENGTH + self.buffer) + 4.0)
         return flow + max(-3.0, min(3.0, 0.15 * best))
 
 

@@ -97,6 +97,7 @@ class LaneChangeEnv(LaneQueries, Driving, PolicyVehicles, gym.Env):
         vehicles_observed: int = 8,
         lane_features: bool = True,
         alongside_features: bool = False,
+        gap_features: bool = False,
         shield: bool = False,
         speed_step: float = 0.1,
         curvature_step: float = 0.01,
@@ -159,6 +160,11 @@ class LaneChangeEnv(LaneQueries, Driving, PolicyVehicles, gym.Env):
         if alongside_features and not lane_features:
             raise ValueError("alongside_features extends the lane features: it needs lane_features=True")
         self.alongside_features = bool(alongside_features)
+        if not isinstance(gap_features, (bool, np.bool_)):
+            raise ValueError(f"gap_features must be True or False, got {gap_features!r}")
+        if gap_features and not lane_features:
+            raise ValueError("gap_features extends the lane features: it needs lane_features=True")
+        self.gap_features = bool(gap_features)
         if not isinstance(shield, (bool, np.bool_)):
             raise ValueError(f"shield must be True or False, got {shield!r}")
         if shield and action_set != "paper":
@@ -189,7 +195,8 @@ class LaneChangeEnv(LaneQueries, Driving, PolicyVehicles, gym.Env):
         # ---- spaces ---------------------------------------------------------------------------
         self.actions = paper_actions(self.speed_step, self.curvature_step)
         self.action_space = spaces.Discrete(len(self.actions) if action_set == "paper" else len(META_ACTIONS))
-        self.vector_dim = vector_size(self.vehicles_observed, self.lane_features, self.alongside_features)
+        self.vector_dim = vector_size(self.vehicles_observed, self.lane_features, self.alongside_features,
+                                      self.gap_features)
         self.vector_space = spaces.Box(-OBS_LIMIT, OBS_LIMIT, shape=(self.vector_dim,), dtype=np.float32)
         if observation == "vector":
             self.observation_space = self.vector_space

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from .observations import lane_block
+from .observations import GAP_RANGE, MERGE_GAP, gap_block, lane_block, nearest_gap_middle
 from .scenarios import Layout
 from .traffic import AgentVehicle, Loc, Traffic
 
@@ -26,6 +26,7 @@ class LaneQueries:
     ego: AgentVehicle | None
     agents: list[AgentVehicle]
     alongside_features: bool
+    gap_features: bool
 
     def lane_occupants(self, lane: int, exclude: AgentVehicle | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(arc length on ``lane``, speed) of every vehicle whose body overlaps ``lane``
@@ -85,8 +86,25 @@ class LaneQueries:
             slots.append((front, v_front - forward, rear, v_rear - forward))
         return slots
 
+    def gap_middles(self, v: AgentVehicle) -> list[float | None]:
+        """For the lanes one to ``v``'s left and right (None where the road has none here): the
+        signed distance along that lane [m] to the middle of its nearest gap long enough to merge
+        into, counting the vehicles within ``GAP_RANGE``. A lane counts from where ``v``'s position
+        projects onto it (on the merge ramp: the main road's right lane along the S-curve too)."""
+        loc = v.loc
+        out: list[float | None] = []
+        for lane in (loc.lane - 1, loc.lane + 1):
+            if not (0 <= lane < self.layout.lanes_count and loc.inside[lane]):
+                out.append(None)
+                continue
+            s_occ, _ = self.lane_occupants(lane, exclude=v)
+            rel = np.asarray(self.lane_gap(lane, loc.s[lane], s_occ), dtype=float).reshape(-1)
+            out.append(nearest_gap_middle(np.sort(rel[np.abs(rel) <= GAP_RANGE]), MERGE_GAP))
+        return out
+
     def _lane_features(self, v: AgentVehicle) -> np.ndarray:
-        return lane_block(self.lane_slots(v), self.alongside_features)
+        block = lane_block(self.lane_slots(v), self.alongside_features)
+        return np.concatenate([block, gap_block(self.gap_middles(v))]) if self.gap_features else block
 
     def lane_gap(self, lane: int, s_from: float, s_to: float | np.ndarray) -> float | np.ndarray:
         """Signed arc-length difference s_to - s_from on ``lane`` (wrapped on rings); ``s_to`` may

@@ -2,7 +2,8 @@
 
 Layout (``EGO_FEATURES``, then the lane block ``LANE_FEATURES`` for each of ``LANE_SLOTS`` when
 ``lane_features`` is on (the default), then ``ALONGSIDE_FEATURES`` for each slot when
-``alongside_features`` is on, then ``vehicles_observed`` blocks of ``OTHER_FEATURES``), all
+``alongside_features`` is on, then ``GAP_FEATURES`` for the left and the right lane when
+``gap_features`` is on, then ``vehicles_observed`` blocks of ``OTHER_FEATURES``), all
 in the observer's frame with "left" positive, as in the paper's action convention:
 
 ego block
@@ -25,6 +26,15 @@ alongside (per lane slot, only with ``alongside_features``; after the lane block
     block has the same gaps at 50 m, where a car alongside (a gap of -2 m) reads -0.04 beside a free
     lane's 2.0: a merge network trained without these steered into such cars from the on-ramp
     (docs/RESULTS.md, merge).
+gaps (left, right; only with ``gap_features``; after the alongside block, or the lane block)
+    the lane one to that side exists here (1/0; on the merge ramp the main road's right lane also
+    along the ramp's S-curve, before it runs beside it); the signed distance along that lane from
+    the observer to the middle of its nearest gap long enough to merge into (the scripted driver's
+    rule, ``nearest_gap_middle``: 20 m between the centres of the cars around it), counting the cars
+    within 100 m, / 50 m (+ = ahead). This is the quantity the scripted driver aligns its speed
+    with before a lane change; from the vehicle blocks the network would have to find it by sorting
+    positions per lane (docs/RESULTS.md, merge: the networks that miss there stay level with a car
+    on the ramp's neighbouring lane until the ramp ends).
 other vehicles (the K nearest within 60 m, nearest first; absent slots are all zero)
     presence; dx, dy / 50 m (dx forward, dy left); dvx, dvy / 10 m/s (relative velocity in the
     observer's frame); sin of the relative heading (+ = pointing left of the observer); lane
@@ -61,6 +71,11 @@ OTHER_FEATURES = ("presence", "dx", "dy", "dvx", "dvy", "sin_dheading", "lane_de
 LANE_SLOTS = ("current", "left", "right")
 LANE_FEATURES = ("present", "front_gap", "front_dv", "rear_gap", "rear_dv")
 ALONGSIDE_FEATURES = ("alongside", "near_gap")
+GAP_SLOTS = ("left", "right")
+GAP_FEATURES = ("lane", "gap_middle")
+#: The centre-to-centre length of a gap worth aligning with: two car lengths (5 m), the scripted
+#: driver's 3 m kept on both sides, 4 m to spare (its rule).
+MERGE_GAP = 2 * (5.0 + 3.0) + 4.0
 GAP_SCALE, GAP_RANGE, GAP_SPEED_SCALE = 50.0, 100.0, 5.0
 NEAR_GAP_SCALE = 10.0
 OBS_LIMIT = 5.0
@@ -68,10 +83,43 @@ SPEED_SCALE, DIST_SCALE, REL_SPEED_SCALE, EDGE_SCALE, END_SCALE = 20.0, 50.0, 10
 PERCEPTION_RANGE = 60.0
 
 
-def vector_size(vehicles_observed: int, lane_features: bool = True, alongside_features: bool = False) -> int:
+def vector_size(vehicles_observed: int, lane_features: bool = True, alongside_features: bool = False,
+                gap_features: bool = False) -> int:
     lanes = len(LANE_SLOTS) * len(LANE_FEATURES) if lane_features else 0
     alongside = len(LANE_SLOTS) * len(ALONGSIDE_FEATURES) if alongside_features else 0
-    return len(EGO_FEATURES) + lanes + alongside + vehicles_observed * len(OTHER_FEATURES)
+    gaps = len(GAP_SLOTS) * len(GAP_FEATURES) if gap_features else 0
+    return len(EGO_FEATURES) + lanes + alongside + gaps + vehicles_observed * len(OTHER_FEATURES)
+
+
+def nearest_gap_middle(rel: np.ndarray, need: float) -> float:
+    """The middle [m] of the gap nearest to 0 among the cars at sorted signed positions ``rel`` along
+    a lane (their centres relative to the observer's), of those at least ``need`` long between the
+    centres; beyond the last car on either side the lane is open (a gap that long starts there)."""
+    edges = np.concatenate([[-np.inf], rel, [np.inf]])
+    best = math.inf
+    for a, b in zip(edges[:-1], edges[1:]):
+        if b - a < need:
+            continue
+        if math.isfinite(a) and math.isfinite(b):
+            mid = (a + b) / 2
+        elif math.isfinite(a):
+            mid = a + need / 2
+        elif math.isfinite(b):
+            mid = b - need / 2
+        else:
+            mid = 0.0  # nobody on the lane
+        if abs(mid) < abs(best):
+            best = float(mid)
+    return best
+
+
+def gap_block(middles: list[float | None]) -> np.ndarray:
+    """The gap features from the nearest gap's middle [m] per side (None: no lane there)."""
+    out = np.zeros((len(GAP_SLOTS), len(GAP_FEATURES)), np.float32)
+    for i, mid in enumerate(middles):
+        if mid is not None:
+            out[i] = (1.0, mid / GAP_SCALE)
+    return out.ravel()
 
 
 def lane_block(neighbours: list[tuple[float, float, float, float] | None], alongside: bool = False) -> np.ndarray:

@@ -27,7 +27,7 @@ from .wire import TransitionSchema
 #: same names): those that change the vector observation's layout, and the shield, which changes what
 #: an action does. A learner checkpoint's metadata carries those the run set, so an evaluation can
 #: build the same env.
-RECORDED_ENV_OPTIONS = ("lane_features", "alongside_features", "shield")
+RECORDED_ENV_OPTIONS = ("lane_features", "alongside_features", "gap_features", "shield")
 
 #: Scenario name -> gymnasium id (registered by importing ``laneshift.actors.envs``).
 SCENARIOS: dict[str, str] = {

@@ -39,7 +39,7 @@ def drive_baselines(env_cfg: EnvConfig, episodes: int, out_dir: Path,
     from laneshift.actors.envs.demonstrator import ScriptedDriver
 
     env = dataclasses.asdict(env_cfg)
-    for later in ("road", "shield"):  # the key of the files written before these existed, which stay valid
+    for later in ("road", "shield", "gap_features"):  # the key of the files written before these existed, which stay valid
         if not env[later]:
             del env[later]
     key = json.loads(json.dumps({"env": env, "episodes": episodes, "episode_seed": TEST_SEED}))

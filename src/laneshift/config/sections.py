@@ -35,6 +35,10 @@ class EnvConfig:
     lane_features: bool = True
     # Per lane slot: a car alongside (1/0) and the nearest bumper gap at 10 m scale (needs lane_features)
     alongside_features: bool = False
+    # Per side (left, right): that lane is there (1/0) and the distance along it to the middle of its
+    # nearest gap long enough to merge into, at 50 m scale (the scripted driver's alignment target;
+    # needs lane_features). Recorded in checkpoints.
+    gap_features: bool = False
     # A safety shield before each step (actors/envs/shield.py): an action a gap rule on what the lane
     # block sees calls unsafe is replaced by a safe one (paper action set). Recorded in checkpoints.
     shield: bool = False
@@ -55,6 +59,8 @@ class EnvConfig:
                f"(env.scenario is {self.scenario!r})", self.road)
         _check(self.lane_features or not self.alongside_features, "env.alongside_features",
                "extends the lane features: it needs env.lane_features=true", self.alongside_features)
+        _check(self.lane_features or not self.gap_features, "env.gap_features",
+               "extends the lane features: it needs env.lane_features=true", self.gap_features)
         _check(not (self.shield and (self.is_lka or self.action_set != "paper")), "env.shield",
                "guards the lane changes of the paper action set (not lka, not action_set=meta)", self.shield)
         _check(not (self.is_allroads and self.observation == "grayscale"), "env.observation",
@@ -83,6 +89,8 @@ class EnvConfig:
             kw["lane_features"] = False
         if self.alongside_features:
             kw["alongside_features"] = True
+        if self.gap_features:
+            kw["gap_features"] = True
         if self.shield:
             kw["shield"] = True
         if self.road:
