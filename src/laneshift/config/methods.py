@@ -73,6 +73,13 @@ METHODS: dict[str, dict[str, Any]] = {
     "dqfd-bc-alongside-safe-shield": {**_DQFD, **_ANNEALED_LEARNER, "learner.bc_loss_weight": 1.0,
                                       "env.alongside_features": True, "learner.terminal_value": -1000.0,
                                       "env.shield": True},
+    # dqfd-bc-alongside-safe-shield that sees, on each side, where the nearest gap long enough to
+    # merge into is (env.gap_features: 4 floats more, the scripted driver's alignment target). Chosen
+    # on merge's validation episodes (seed 0, 200 per setting): 100 / 93.5 and 99.5 / 88.0 against
+    # 99.5 / 88.0 and 99.5 / 82.0 without them (docs/RESULTS.md, "gap features").
+    "dqfd-bc-alongside-gaps-safe-shield": {**_DQFD, **_ANNEALED_LEARNER, "learner.bc_loss_weight": 1.0,
+                                           "env.alongside_features": True, "env.gap_features": True,
+                                           "learner.terminal_value": -1000.0, "env.shield": True},
     # The LKA plant's recipe (MATLAB's lane-keeping example has no demonstrations): one-step Double
     # DQN with a larger step size, learning from 1,000 items on and 64 samples per inserted item;
     # 20,000 env steps centre the car (docs/RESULTS.md, LKA; `laneshift experiment lka`).
