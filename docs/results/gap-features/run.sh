@@ -2,7 +2,7 @@
 # Validation probes of docs/RESULTS.md, "where the gap is" (200 validation episodes per initial-lane
 # setting, seeds from 200,000, 300 steps; never the test episodes), from a checkout at revision
 # 548a093 or later:  bash docs/results/gap-features/run.sh OUT_DIR
-# 1. the published dqfd-bc-alongside-safe-shield networks of seed 0 (merge, straight) -> base-*;
+# 1. the published dqfd-bc-alongside-safe-shield networks of seed 0 (merge, straight, curve) -> base-*;
 # 2. the same method with env.gap_features=true, seed 0, trained as the protocol trains -> *-gaps-*.
 OUT=${1:?usage: run.sh OUT_DIR}
 mkdir -p "$OUT"
@@ -12,7 +12,7 @@ evalv() {  # evalv CHECKPOINT NAME
        --max-steps 300 --initial-lane $lane --json > "$OUT/$2-$lane.json"
   done
 }
-for road in merge straight; do
+for road in merge straight curve; do
   evalv results/checkpoints/$road-dqfd-bc-alongside-safe-shield-seed0-final.safetensors base-$road-shield-s0
   steps=400000; [ $road = straight ] && steps=600000
   [ -f "$OUT/$road-gaps-shield-s0/checkpoints/final.safetensors" ] || \
