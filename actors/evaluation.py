@@ -185,7 +185,7 @@ def load_greedy_policy(checkpoint: str | Path) -> GreedyPolicy:
     return load_checkpoint_policy(checkpoint).greedy()
 
 
-def checkpoint_env_settings(meta: Mapping[str, str]) -> dict[str, str]:
+def checkpoint_env_settings(meta: Mapping[str, str]) -> dict[str, str | bool | float]:
     """The env a checkpoint was trained on, as far as its metadata tells, as EnvConfig fields:
     ``observation`` (stacked frames, a 3-d uint8 ``obs_shape``: grayscale; a 1-d one: vector) and
     ``scenario`` (its ``env_id``, when it is one of the scenarios), and the options an evaluation
@@ -200,8 +200,10 @@ def checkpoint_env_settings(meta: Mapping[str, str]) -> dict[str, str]:
     {'observation': 'vector'}
     >>> checkpoint_env_settings({"obs_shape": "88", "alongside_features": "1"})
     {'observation': 'vector', 'alongside_features': True}
+    >>> checkpoint_env_settings({"obs_shape": "88", "shield": "1", "shield_gap": "2.0"})
+    {'observation': 'vector', 'shield': True, 'shield_gap': 2.0}
     """
-    out: dict[str, str] = {}
+    out: dict[str, str | bool | float] = {}
     dims = [d for d in str(meta.get("obs_shape", "")).split(",") if d.strip()]
     if len(dims) == 3 or meta.get("obs_dtype") == "|u1":
         out["observation"] = "grayscale"
@@ -210,9 +212,17 @@ def checkpoint_env_settings(meta: Mapping[str, str]) -> dict[str, str]:
     scenario = {env_id: name for name, env_id in SCENARIOS.items()}.get(str(meta.get("env_id", "")))
     if scenario is not None:
         out["scenario"] = scenario
-    for option in RECORDED_ENV_OPTIONS:  # written by the learner where the run set them ("0" / "1")
-        if str(meta.get(option, "")) in ("0", "1"):
-            out[option] = meta[option] == "1"
+    defaults = EnvConfig()
+    for option in RECORDED_ENV_OPTIONS:  # written by the learner where the run set them
+        raw = str(meta.get(option, ""))
+        if isinstance(getattr(defaults, option), bool):  # "0" / "1"
+            if raw in ("0", "1"):
+                out[option] = raw == "1"
+        elif raw:  # a figure (the shield's)
+            try:
+                out[option] = float(raw)
+            except ValueError:
+                pass  # not this version's writing: the env's default stands, as for an older checkpoint
     return out
 
 

@@ -184,7 +184,8 @@ class Learner:
                 "env_steps": self.episodes.env_steps, "elapsed_s": round(time.monotonic() - self.started, 1)}
         # The observation layout's options and the shield where the run set them, so `laneshift eval`
         # builds the env this network was trained in without being told (checkpoint_env_settings).
-        meta.update({key: int(value) for key, value in self.spec.env_kwargs if key in RECORDED_ENV_OPTIONS})
+        meta.update({key: int(value) if isinstance(value, bool) else value
+                     for key, value in self.spec.env_kwargs if key in RECORDED_ENV_OPTIONS})
         return self.files.save_policy(self.agent.policy_net, name, meta)
 
     # ------------------------------------------------------------------ main loop

@@ -31,7 +31,7 @@ from pathlib import Path
 import zenoh
 
 from laneshift import transport, wire
-from laneshift.config import RunConfig, worker_names
+from laneshift.config import SHIELD_DECEL, SHIELD_GAP, RunConfig, worker_names
 from laneshift.envspec import EnvSpec
 
 from . import wal as wal_log
@@ -274,7 +274,8 @@ def build_core(cfg: RunConfig, spec: EnvSpec, shard: int = 0) -> ReplayCore:
 #: Env fields added after replay checkpoints were first written, with their defaults: such a field
 #: joins the digest only when a run sets it, so a run started before it existed still resumes
 #: (``laneshift train --resume``) on the version that added it. Add every new env field here.
-ENV_FIELDS_ADDED_LATER: dict[str, object] = {"alongside_features": False, "gap_features": False, "shield": False}
+ENV_FIELDS_ADDED_LATER: dict[str, object] = {"alongside_features": False, "gap_features": False, "shield": False,
+                                             "shield_gap": SHIELD_GAP, "shield_decel": SHIELD_DECEL}
 
 
 def config_digest(cfg: RunConfig, shard: int = 0) -> str:

@@ -146,3 +146,33 @@ def test_policy_vehicles_driven_by_the_agent_drive_behind_its_shield_too():
     guarded = sum(_reckless_copies(True, s) for s in range(3))
     assert bare >= 9, bare  # measured 20, 15 and 11 crashes an episode without the shield
     assert guarded <= bare // 5, (bare, guarded)  # measured 0, 0, 0 behind it
+
+
+def test_the_shields_figures_are_the_drivers_by_default_and_set_from_the_config():
+    from laneshift.actors.envs.demonstrator import ScriptedDriver
+    from laneshift.config import SHIELD_DECEL, SHIELD_GAP, ConfigError, EnvConfig
+
+    default = make_env("merge", shield=True).unwrapped.gap_shield
+    driver = ScriptedDriver(make_env("merge"))
+    assert (default.buffer, default.decel) == (SHIELD_GAP, SHIELD_DECEL) == (driver.buffer, driver.decel)
+    cfg = EnvConfig(scenario="merge", shield=True, shield_gap=2.0, shield_decel=1.0)
+    assert cfg.env_kwargs()["shield_gap"] == 2.0 and cfg.env_kwargs()["shield_decel"] == 1.0
+    assert "shield_gap" not in EnvConfig(shield=True).env_kwargs()
+    tuned = make_env("merge", **{k: v for k, v in cfg.env_kwargs().items() if k.startswith("shield")}).unwrapped.gap_shield
+    assert (tuned.buffer, tuned.decel) == (2.0, 1.0)
+    with pytest.raises(ConfigError, match="env.shield_gap.*needs env.shield=true"):
+        EnvConfig(shield_gap=2.0)
+    with pytest.raises(ConfigError, match="env.shield_decel"):
+        EnvConfig(shield=True, shield_decel=1.5)  # more than the actions can brake
+    with pytest.raises(ValueError, match="shield_decel"):
+        make_env("merge", shield=True, shield_decel=1.5)
+
+
+def test_a_smaller_gap_lets_a_lane_change_through_that_the_drivers_refuses():
+    tight = GapShield(speed_step=0.1, curvature_step=0.01, dt=0.1, length=5.0, buffer=2.0, decel=1.0)
+    follower = (INF, 0.0, 4.0, 1.5)  # 4 m behind on the left, 1.5 m/s faster
+    assert not SHIELD.lane_free(follower)  # needs 3 + 1.5^2 / 1.8 = 4.25 m
+    assert tight.lane_free(follower)  # needs 2 + 1.5^2 / 2 = 3.125 m
+    drifting_left = view(slots=(FREE, follower, FREE), offset=0.8, heading=0.05)
+    assert SHIELD.safe_action(act(KEEP, LEFT), drifting_left) == act(KEEP, STRAIGHT)
+    assert tight.safe_action(act(KEEP, LEFT), drifting_left) == act(KEEP, LEFT)

@@ -99,6 +99,8 @@ class LaneChangeEnv(LaneQueries, Driving, PolicyVehicles, gym.Env):
         alongside_features: bool = False,
         gap_features: bool = False,
         shield: bool = False,
+        shield_gap: float = 3.0,
+        shield_decel: float = 0.9,
         speed_step: float = 0.1,
         curvature_step: float = 0.01,
         ego_speed_spread: float = 2.0,
@@ -189,8 +191,10 @@ class LaneChangeEnv(LaneQueries, Driving, PolicyVehicles, gym.Env):
         self.render_mode = render_mode
         self.observation_type = observation
         self.action_set = action_set
+        gap = _float_arg("shield_gap", shield_gap, 0.0, lo_open=True)
+        decel = _float_arg("shield_decel", shield_decel, 0.0, self.speed_step * self.policy_frequency, lo_open=True)
         self.gap_shield = GapShield(self.speed_step, self.curvature_step, 1.0 / self.policy_frequency,
-                                    AgentVehicle.LENGTH) if self.shield else None
+                                    AgentVehicle.LENGTH, buffer=gap, decel=decel) if self.shield else None
 
         # ---- spaces ---------------------------------------------------------------------------
         self.actions = paper_actions(self.speed_step, self.curvature_step)

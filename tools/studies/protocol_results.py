@@ -13,7 +13,7 @@ import dataclasses
 import json
 from pathlib import Path
 
-from laneshift.config import EnvConfig
+from laneshift.config import SHIELD_DECEL, SHIELD_GAP, EnvConfig
 from laneshift.progress import write
 from laneshift.tools.studies import allroads
 from laneshift.tools.studies.evaluate import INITIAL_LANES, evaluate_lanes
@@ -39,8 +39,10 @@ def drive_baselines(env_cfg: EnvConfig, episodes: int, out_dir: Path,
     from laneshift.actors.envs.demonstrator import ScriptedDriver
 
     env = dataclasses.asdict(env_cfg)
-    for later in ("road", "shield", "gap_features"):  # the key of the files written before these existed, which stay valid
-        if not env[later]:
+    # The key of the files written before these existed, which stay valid: each at its default drops out.
+    for later, default in (("road", ""), ("shield", False), ("gap_features", False), ("shield_gap", SHIELD_GAP),
+                           ("shield_decel", SHIELD_DECEL)):
+        if env[later] == default:
             del env[later]
     key = json.loads(json.dumps({"env": env, "episodes": episodes, "episode_seed": TEST_SEED}))
     path = out_dir / filename

@@ -35,9 +35,10 @@ from .methods import METHODS, method_settings
 from .checks import NAME, ConfigError
 from .run import (AUTO_EVAL_FROM, SECTIONS, DeployConfig, RunConfig, TrainConfig, TransportConfig, worker_budgets,
                   worker_names)
-from .sections import DEMO_MODES, SCENARIO_NAMES, ActorConfig, EnvConfig, LearnerConfig, ReplayConfig
+from .sections import (DEMO_MODES, SCENARIO_NAMES, SHIELD_DECEL, SHIELD_GAP, ActorConfig, EnvConfig, LearnerConfig,
+                       ReplayConfig)
 
-__all__ = ["AUTO_EVAL_FROM", "DEMO_MODES", "METHODS", "NAME", "SCENARIO_NAMES", "SECTIONS", "ActorConfig", "ConfigError", "DeployConfig",
-           "EnvConfig", "LearnerConfig", "ReplayConfig", "RunConfig", "TrainConfig", "TransportConfig",
+__all__ = ["AUTO_EVAL_FROM", "DEMO_MODES", "METHODS", "NAME", "SCENARIO_NAMES", "SECTIONS", "SHIELD_DECEL",
+           "SHIELD_GAP", "ActorConfig", "ConfigError", "DeployConfig", "EnvConfig", "LearnerConfig", "ReplayConfig", "RunConfig", "TrainConfig", "TransportConfig",
            "build_section", "load_run_config", "method_settings", "read_config_file", "save_run_config",
            "worker_budgets", "worker_names"]

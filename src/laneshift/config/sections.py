@@ -17,6 +17,9 @@ from typing import Any, Literal
 from .checks import ConfigError, _check, _check_choices
 
 SCENARIO_NAMES = ("straight", "merge", "curve", "roundabout", "allroads", "lka")
+#: The safety shield's default figures: the scripted driver's bumper gap [m] and planning deceleration
+#: [m/s^2], as the env's GapShield has them (actors/envs/shield.py; tests/test_shield.py holds them equal).
+SHIELD_GAP, SHIELD_DECEL = 3.0, 0.9
 
 
 @dataclass(frozen=True)
@@ -42,6 +45,11 @@ class EnvConfig:
     # A safety shield before each step (actors/envs/shield.py): an action a gap rule on what the lane
     # block sees calls unsafe is replaced by a safe one (paper action set). Recorded in checkpoints.
     shield: bool = False
+    # The shield's bumper gap kept [m] (with env.shield; the scripted driver's by default). Recorded in checkpoints.
+    shield_gap: float = SHIELD_GAP
+    # The speed change the shield plans with [m/s^2] (with env.shield; the scripted driver's by default; at
+    # most the paper actions' own 1 m/s^2). Recorded in checkpoints.
+    shield_decel: float = SHIELD_DECEL
     # allroads only: "" = each episode's road is drawn from its reset seed (seed % 4: straight, merge,
     # curve, roundabout); a road's name = every episode on that road (to test one road)
     road: str = ""
@@ -63,6 +71,12 @@ class EnvConfig:
                "extends the lane features: it needs env.lane_features=true", self.gap_features)
         _check(not (self.shield and (self.is_lka or self.action_set != "paper")), "env.shield",
                "guards the lane changes of the paper action set (not lka, not action_set=meta)", self.shield)
+        _check(self.shield_gap > 0, "env.shield_gap", "must be > 0 m", self.shield_gap)
+        _check(0 < self.shield_decel <= 1.0, "env.shield_decel",
+               "must be in (0, 1] m/s^2 (the paper actions change the speed by at most 1 m/s^2)", self.shield_decel)
+        for name, default in (("shield_gap", SHIELD_GAP), ("shield_decel", SHIELD_DECEL)):
+            _check(self.shield or getattr(self, name) == default, f"env.{name}",
+                   "sets a figure of the safety shield: it needs env.shield=true", getattr(self, name))
         _check(not (self.is_allroads and self.observation == "grayscale"), "env.observation",
                "allroads needs the vector observation (the road's one-hot is appended to it; a frame has "
                "no place for it)", self.observation)
@@ -93,6 +107,10 @@ class EnvConfig:
             kw["gap_features"] = True
         if self.shield:
             kw["shield"] = True
+        if self.shield_gap != SHIELD_GAP:
+            kw["shield_gap"] = self.shield_gap
+        if self.shield_decel != SHIELD_DECEL:
+            kw["shield_decel"] = self.shield_decel
         if self.road:
             kw["road"] = self.road
         return kw
