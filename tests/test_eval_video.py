@@ -1,4 +1,4 @@
-"""`laneshift eval` reads what it can from the checkpoint (observation type, scenario), and
+"""`laneshift eval` reads what it can from the checkpoint (observation type, scenario, shield), and
 `--video` records the evaluation's own first episodes as a GIF: on tiny hand-made checkpoints and
 5-step episodes, seconds in all.
 
@@ -64,6 +64,21 @@ def test_the_checkpoints_env_id_chooses_the_scenario_unless_scenario_is_given(tm
         assert main(["eval", "--checkpoint", str(path), "--scenario", "straight", "--episodes", "1",
                      "--max-steps", "3"]) == 0
         assert "from the checkpoint" not in capsys.readouterr().err
+
+
+def test_a_shield_checkpoint_takes_other_shield_figures_without_restating_the_shield(tmp_path, capsys):
+    path = _checkpoint(tmp_path / "shield.safetensors", _vector_shape(), shield=1, shield_gap=2.5)
+    assert main(["eval", "--checkpoint", str(path), "--episodes", "1", "--max-steps", "3", "--json"]) == 0
+    out = capsys.readouterr()
+    assert "from the checkpoint: shield True, shield_gap 2.5" in out.err
+    assert "shielded_step_rate" in json.loads(out.out)
+    assert main(["eval", "--checkpoint", str(path), "--episodes", "1", "--max-steps", "3",
+                 "--set", "env.shield_decel=1.0"]) == 0
+    assert "shield True, shield_gap 2.5" in capsys.readouterr().err
+    # Without a checkpoint that says so, the figures alone are refused in one line.
+    plain = _checkpoint(tmp_path / "plain.safetensors", _vector_shape())
+    assert main(["eval", "--checkpoint", str(plain), "--episodes", "1", "--set", "env.shield_gap=2"]) != 0
+    assert "needs env.shield=true" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("fps, every", [(None, 1), (5.0, 2)])

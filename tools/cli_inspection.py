@@ -12,21 +12,25 @@ import json
 import sys
 from pathlib import Path
 
-from laneshift.config import RunConfig
 from laneshift.tools.argtypes import (add_config_args, config_from, endpoint, fraction, non_negative_int, parse_set,
                                       positive_float, positive_int)
 
 
 def _eval(args: argparse.Namespace) -> int:
-    import dataclasses
-
     from laneshift.tools.studies.evaluate import evaluate_checkpoint, format_result
 
-    cfg = config_from(args, {"env.scenario": args.scenario, "env.initial_lane": args.initial_lane,
-                              "env.max_steps": args.max_steps, "env.observation": args.observation})
     try:
-        picked = _eval_env_from_checkpoint(args, cfg)
-        env_cfg = dataclasses.replace(cfg.env, **picked)
+        picked = _eval_env_from_checkpoint(args)
+    except (ValueError, OSError) as exc:  # no such file, or not a checkpoint
+        print(f"laneshift eval: {exc}", file=sys.stderr)
+        return 2
+    # The checkpoint's settings sit below the user's choices, and the config is checked with them in
+    # it: `--set env.shield_gap=2` on a checkpoint trained behind the shield needs no `env.shield`.
+    cfg = config_from(args, {"env.scenario": args.scenario, "env.initial_lane": args.initial_lane,
+                             "env.max_steps": args.max_steps, "env.observation": args.observation},
+                      preset={f"env.{name}": value for name, value in picked.items()})
+    try:
+        env_cfg = cfg.env
         recorder = None
         if args.video:
             if env_cfg.is_lka:
@@ -60,13 +64,13 @@ def _eval(args: argparse.Namespace) -> int:
     return 0
 
 
-def _eval_env_from_checkpoint(args: argparse.Namespace, cfg: RunConfig) -> dict[str, str]:
+def _eval_env_from_checkpoint(args: argparse.Namespace) -> dict[str, str | bool | float]:
     """The env settings ``laneshift eval`` takes from the checkpoint's metadata (its observation
-    type, scenario and layout options) where the user chose none: not by a flag, ``--set`` or the ``--config``
-    file; only those that differ from the config's. An explicit choice that contradicts the
-    checkpoint is kept, and refused by the evaluation with what would fit."""
+    type, scenario, layout options and shield) where the user chose none: not by a flag, ``--set`` or
+    the ``--config`` file; only those that differ from the defaults. An explicit choice that
+    contradicts the checkpoint is kept, and refused by the evaluation with what would fit."""
     from laneshift.actors.evaluation import checkpoint_env_settings
-    from laneshift.config import read_config_file
+    from laneshift.config import EnvConfig, read_config_file
     from laneshift.wire import safetensors_loads
 
     chosen = {name for name in ("scenario", "observation") if getattr(args, name) is not None}
@@ -74,8 +78,9 @@ def _eval_env_from_checkpoint(args: argparse.Namespace, cfg: RunConfig) -> dict[
     if args.config:
         chosen |= set(read_config_file(args.config).get("env", {}))
     _, meta = safetensors_loads(Path(args.checkpoint).read_bytes())
+    defaults = EnvConfig()
     return {name: value for name, value in checkpoint_env_settings(meta).items()
-            if name not in chosen and getattr(cfg.env, name) != value}
+            if name not in chosen and getattr(defaults, name) != value}
 
 
 def video_path(text: str) -> str:
