@@ -1,4 +1,4 @@
-"""The tables of docs/results/shield-figures/run.sh: per network set and shield figures, the mean of
+"""The tables of docs/results/shield-figures/run.sh and run_more.sh: per network set and shield figures, the mean of
 the three seeds' survival and achievement (validation: the plain means; test: with a 95 % percentile
 bootstrap interval over seeds), and on the test episodes the drivers behind the same shield.
 
@@ -11,7 +11,9 @@ from pathlib import Path
 from laneshift.tools.studies.stats import bootstrap_ci
 
 out = Path(sys.argv[1])
-NETS = {"merge": "merge-dqfd-bc-alongside-gaps-safe-shield", "straight": "straight-dqfd-bc-alongside-safe-shield"}
+NETS = {"merge": "merge-dqfd-bc-alongside-gaps-safe-shield", "straight": "straight-dqfd-bc-alongside-safe-shield",
+        "curve": "curve-dqfd-bc-alongside-safe-shield", "roundabout": "roundabout-dqfd-bc-alongside-safe-shield",
+        "straight-policytraffic": "straight-policytraffic-dqfd-bc-alongside-safe-shield"}
 LANES = ("random", "non-target")
 
 
