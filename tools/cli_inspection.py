@@ -19,19 +19,18 @@ from laneshift.tools.argtypes import (add_config_args, config_from, endpoint, fr
 def _eval(args: argparse.Namespace) -> int:
     from laneshift.tools.studies.evaluate import evaluate_checkpoint, format_result
 
-    unreadable: Exception | None = None
+    shortcuts = {"env.scenario": args.scenario, "env.initial_lane": args.initial_lane,
+                 "env.max_steps": args.max_steps, "env.observation": args.observation}
     try:
         picked = _eval_env_from_checkpoint(args)
-    except (ValueError, OSError) as exc:  # no such file, or not a checkpoint: after the config's own errors
-        picked, unreadable = {}, exc
+    except (ValueError, OSError) as exc:  # no such file, or not a checkpoint
+        config_from(args, shortcuts)  # the config's own errors are reported first
+        print(f"laneshift eval: {exc}", file=sys.stderr)
+        return 2
     # The checkpoint's settings sit below the user's choices, and the config is checked with them in
     # it: `--set env.shield_gap=2` on a checkpoint trained behind the shield needs no `env.shield`.
-    cfg = config_from(args, {"env.scenario": args.scenario, "env.initial_lane": args.initial_lane,
-                             "env.max_steps": args.max_steps, "env.observation": args.observation},
-                      preset={f"env.{name}": value for name, value in picked.items()})
+    cfg = config_from(args, shortcuts, preset={f"env.{name}": value for name, value in picked.items()})
     try:
-        if unreadable is not None:
-            raise unreadable
         env_cfg = cfg.env
         recorder = None
         if args.video:
