@@ -13,7 +13,7 @@ import dataclasses
 import json
 from pathlib import Path
 
-from laneshift.config import SHIELD_DECEL, SHIELD_GAP, EnvConfig
+from laneshift.config import EnvConfig
 from laneshift.progress import write
 from laneshift.tools.studies import allroads
 from laneshift.tools.studies.evaluate import INITIAL_LANES, evaluate_lanes
@@ -39,11 +39,15 @@ def drive_baselines(env_cfg: EnvConfig, episodes: int, out_dir: Path,
     from laneshift.actors.envs.demonstrator import ScriptedDriver
 
     env = dataclasses.asdict(env_cfg)
-    # The key of the files written before these existed, which stay valid: each at its default drops out.
-    for later, default in (("road", ""), ("shield", False), ("gap_features", False), ("shield_gap", SHIELD_GAP),
-                           ("shield_decel", SHIELD_DECEL)):
-        if env[later] == default:
-            del env[later]
+    from laneshift.replay_server.service import ENV_FIELDS_ADDED_LATER
+
+    # The key of the files written before these fields existed, which stay valid: each at its default
+    # drops out. They are the replay digest's later fields (one list, kept complete by its test) and
+    # `road`; not `alongside_features`, which the key has carried since that field came.
+    later = {"road": "", **{k: v for k, v in ENV_FIELDS_ADDED_LATER.items() if k != "alongside_features"}}
+    for name, default in later.items():
+        if env[name] == default:
+            del env[name]
     key = json.loads(json.dumps({"env": env, "episodes": episodes, "episode_seed": TEST_SEED}))
     path = out_dir / filename
     if path.is_file():
