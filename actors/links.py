@@ -112,6 +112,19 @@ class ZenohActorLinks:
         body = self._ask({"cmd": "actor_state", "actor": self.name})
         return {"env_steps": int(body["env_steps"]), "next_seq": int(body["next_seq"])} if body else None
 
+    def wait_stored_state(self, timeout_s: float, router: str = "") -> dict[str, int]:
+        """``stored_state``, asked again until the replay server answers (it may still be starting);
+        TimeoutError after ``timeout_s`` (naming ``router``, the endpoint this session went through).
+        Where a worker process starts its share."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            state = self.stored_state()
+            if state is not None:
+                return state
+            time.sleep(0.2)
+        raise TimeoutError(f"{self.name}: the replay server did not answer within {timeout_s:.0f} s"
+                           + (f" (router {router})" if router else ""))
+
     def _ask(self, command: dict, timeout_s: float | None = None) -> dict | None:
         reply = transport.query(self.session, wire.replay_control_key(self.replay_ns), wire.encode_json(command),
                                 self.timeout_s if timeout_s is None else timeout_s)

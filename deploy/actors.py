@@ -19,7 +19,6 @@ from __future__ import annotations
 import os
 import sys
 import threading
-import time
 import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -287,20 +286,10 @@ class EnvWorkerActor:
     def run(self, env_steps: int, restarts: int = 0) -> dict:
         from laneshift.actors.worker import Resume
 
-        state = self._resume_point()
+        # Where the replay server says this worker stands (a first start: zeros).
+        state = self.links.wait_stored_state(self.cfg.deploy.start_timeout_s, self.cfg.transport.router)
         resume = Resume(env_steps=min(state["env_steps"], env_steps), next_seq=state["next_seq"], restarts=restarts)
         summary = self.worker.run(self.links, env_steps, resume).as_dict()
         return {**summary, "node": self.where["node_id"], "node_ip": self.where["node_ip"], "restarts": restarts,
                 "resumed_at": resume.env_steps,
                 "resent": self.links.resent}  # batches sent again that the replay server lacked (or may have)
-
-    def _resume_point(self) -> dict[str, int]:
-        """Ask the replay server what it stored of this worker (a first start gets zeros)."""
-        deadline = time.monotonic() + self.cfg.deploy.start_timeout_s
-        while time.monotonic() < deadline:
-            state = self.links.stored_state()
-            if state is not None:
-                return state
-            time.sleep(0.2)
-        raise TimeoutError(f"{self.name}: the replay server did not answer within "
-                           f"{self.cfg.deploy.start_timeout_s:.0f} s (router {self.cfg.transport.router})")

@@ -144,10 +144,12 @@ class InProcessLearnerLinks(ReplayForwarding):
         self.board.stop.set()
 
 
-def train_inprocess(cfg: RunConfig) -> dict:
-    """Run workers and learner as threads until the env-step budget is spent; returns a summary."""
+def train_inprocess(cfg: RunConfig, stop: threading.Event | None = None) -> dict:
+    """Run workers and learner as threads until the env-step budget is spent, or until ``stop`` is
+    set (a caller's deadline: the workers end their loops, then the learner writes its final
+    checkpoint as at the budget's end); returns a summary."""
     builder = Builder(cfg)
-    board = Board(cores=[builder.replay_core(i) for i in range(cfg.replay.shards)])
+    board = Board(cores=[builder.replay_core(i) for i in range(cfg.replay.shards)], stop=stop or threading.Event())
     learner_stop = threading.Event()
     links = InProcessLearnerLinks(board, builder.spec.schema, cfg.replay.priority_beta, cfg.learner.seed)
     learner = builder.learner(links, learner_stop)

@@ -17,7 +17,7 @@ import pytest
 SYSTEM_MODULES = {"test_system_local", "test_faults", "test_network_faults", "test_two_host", "test_docs_examples",
                   "test_deploy_files", "test_deploy_kuberay", "test_wait_reporter", "test_cli_errors",
                   "test_experiments", "test_protocol", "test_lka_protocol", "test_chaos_suite", "test_bench_shards",
-                  "test_worker_resend"}
+                  "test_worker_resend", "test_processes_without_ray"}
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

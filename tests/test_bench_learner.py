@@ -33,7 +33,9 @@ def test_bench_learner_json_shape(capsys) -> None:
                     "cnn-b64": ("NatureCNN", [4, 100, 100], "uint8", 64),
                     "small-b32": ("SmallCNN", [4, 100, 100], "uint8", 32),
                     "small-b64": ("SmallCNN", [4, 100, 100], "uint8", 64),
-                    "small-b32-bf16": ("SmallCNN", [4, 100, 100], "uint8", 32)}
+                    "small-b32-bf16": ("SmallCNN", [4, 100, 100], "uint8", 32),
+                    "small-b128": ("SmallCNN", [4, 100, 100], "uint8", 128),
+                    "small-b128-bf16": ("SmallCNN", [4, 100, 100], "uint8", 128)}
     for case in out["cases"]:
         assert case["params"] > 0 and case["n_actions"] == 9
         for impl in ("learner", "bare"):

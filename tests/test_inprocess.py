@@ -68,6 +68,25 @@ def test_stop_return_ends_the_run_at_the_first_episode_that_reaches_it(tmp_path)
     assert sum(w["env_steps"] for w in result["workers"]) < 100_000  # stopped long before the budget
 
 
+def test_a_callers_stop_ends_the_run_early_with_a_final_checkpoint(tmp_path):
+    """``train_inprocess(cfg, stop)``: a caller's deadline ends the workers' loops long before the
+    budget, and the learner still writes its final network."""
+    import threading
+
+    stop = threading.Event()
+    timer = threading.Timer(3.0, stop.set)
+    timer.start()
+    cfg = load_run_config(overrides={**FAST, "train.env_steps": 10_000_000, "train.run_dir": str(tmp_path)})
+    try:
+        result = train_inprocess(cfg, stop)
+    finally:
+        timer.cancel()
+    steps = sum(w["env_steps"] for w in result["workers"])
+    assert 0 < steps < 10_000_000
+    assert result["replay"]["tables"]["online"]["inserted"] == steps
+    assert list(tmp_path.glob("**/final.safetensors"))
+
+
 def test_the_worker_gets_decoded_weights_and_counts_those_it_cannot_use(tmp_path):
     """The links decode each WEIGHTS message: the worker gets ``wire.Weights``, or the WireError
     of a message that cannot be read; that one and another network's weights are counted in

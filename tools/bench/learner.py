@@ -72,6 +72,8 @@ CASES = (
     Case("small-b32", (4, 100, 100), "uint8", 32, "small"),  # learner.cnn=small: the pixel runs' network
     Case("small-b64", (4, 100, 100), "uint8", 64, "small"),
     Case("small-b32-bf16", (4, 100, 100), "uint8", 32, "small", "bf16"),  # learner.cnn_precision=bf16
+    Case("small-b128", (4, 100, 100), "uint8", 128, "small"),  # the GPU pixel study's batch
+    Case("small-b128-bf16", (4, 100, 100), "uint8", 128, "small", "bf16"),
 )
 
 
