@@ -12,6 +12,7 @@ component.
 
 from __future__ import annotations
 
+import math
 from typing import Any, Callable
 
 import numpy as np
@@ -23,6 +24,24 @@ Sample = Callable[[wire.SampleRequest], "wire.SampledBatch | wire.WireError | No
 
 #: The wait when the replay server did not answer at all.
 NO_ANSWER_WAIT_S = 0.1
+
+#: The largest sample reply the learner asks for. glibc hands a freed block out again only up to its
+#: 32 MB mmap ceiling; a larger reply buffer (the replay server's, and the learner's copy) is mapped
+#: and page-faulted anew for every reply. Over zenoh on a 2-core machine, 41 MB pixel replies (4
+#: batches of 128 rows) cost 30.7 ms per 128 rows against 19.2 ms for 20 MB replies
+#: (docs/results/pixels-gpu/sample_cost.py).
+MAX_REPLY_BYTES = 30 * 2**20
+
+
+def batches_per_request(batch_size: int, prefetch: int, obs_shape: tuple[int, ...], obs_dtype: str) -> int:
+    """``learner.prefetch`` batches per sample request, fewer where their reply would pass
+    ``MAX_REPLY_BYTES`` (a row carries two observations); at least one.
+
+    >>> batches_per_request(128, 4, (4, 100, 100), "|u1"), batches_per_request(256, 4, (82,), "<f4")
+    (3, 4)
+    """
+    row_bytes = 2 * math.prod(obs_shape) * np.dtype(obs_dtype).itemsize
+    return max(1, min(prefetch, MAX_REPLY_BYTES // max(1, batch_size * row_bytes)))
 
 
 def retry_delay(refusal: wire.WireError | None) -> float:

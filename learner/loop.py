@@ -43,7 +43,7 @@ from laneshift.config import RunConfig, worker_names
 from laneshift.envspec import RECORDED_ENV_OPTIONS, EnvSpec
 from laneshift.qnet import weights_of
 
-from .batches import retry_delay, sample_or_wait, split_updates
+from .batches import MAX_REPLY_BYTES, batches_per_request, retry_delay, sample_or_wait, split_updates
 from .dqn import METRIC_NAMES, DoubleDQN
 from .episodes import EpisodeStats
 from .metrics import MetricsLog
@@ -85,6 +85,13 @@ class Learner:
         self.last_update: Mapping[str, float] = {}  # the last update's metrics (dqn.UpdateMetrics: read lazily)
         self.replay_stats: dict = {}
         self.prefetcher: Prefetcher | None = None  # async mode: the next sample request in flight
+        # learner.prefetch batches per request, fewer where the reply would be too large (pixels).
+        self.per_request = batches_per_request(cfg.learner.batch_size, cfg.learner.prefetch, spec.schema.obs_shape,
+                                               spec.schema.obs_dtype)
+        if self.per_request < cfg.learner.prefetch:
+            print(f"learner: {self.per_request} batches of {cfg.learner.batch_size} per sample request, not "
+                  f"learner.prefetch {cfg.learner.prefetch} (a reply stays under "
+                  f"{MAX_REPLY_BYTES // 2**20} MB)", flush=True)
         self.unused_sample_rows = 0  # rows sampled ahead that no update used (the end of a run)
         self.stop_reason: dict | None = None
         self.started = time.monotonic()
@@ -255,7 +262,7 @@ class Learner:
               flush=True)
         next_log = time.monotonic()
         while self.agent.updates < self.lcfg.phase1_updates and not self._should_stop():
-            n = min(self.lcfg.prefetch, self.lcfg.phase1_updates - self.agent.updates)
+            n = min(self.per_request, self.lcfg.phase1_updates - self.agent.updates)
             batch = sample_or_wait(self.links.sample, wire.SampleRequest(self.lcfg.batch_size, n), self.stop.wait)
             if batch is not None:
                 self._updates(batch)
@@ -303,7 +310,7 @@ class Learner:
     def _async_step(self) -> None:
         if self.prefetcher is None:  # the next request is asked for while a batch trains (prefetch.py)
             self.prefetcher = Prefetcher(self.links.sample,
-                                         lambda: wire.SampleRequest(self.lcfg.batch_size, self.lcfg.prefetch), self.stop)
+                                         lambda: wire.SampleRequest(self.lcfg.batch_size, self.per_request), self.stop)
         waited = time.monotonic()
         batch = self.prefetcher.take(timeout=0.5)  # refusals are waited out on the prefetch thread
         now = time.monotonic()

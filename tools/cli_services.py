@@ -12,9 +12,12 @@ import argparse
 import os
 import sys
 import threading
-from typing import NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from laneshift.tools.argtypes import add_config_args, config_from, endpoint, non_negative_int
+
+if TYPE_CHECKING:
+    from laneshift.actors.seams import ActorLinks
 
 
 def end_service_process(rc: int) -> NoReturn:
@@ -57,13 +60,13 @@ class _SignalStop:
     """A worker's links with SIGINT/SIGTERM as a stop request beside the run-wide stop message:
     the worker ends its loop, sends what its last batch holds and returns its summary."""
 
-    def __init__(self, links, stop: threading.Event):
+    def __init__(self, links: ActorLinks, stop: threading.Event):
         self._links, self._stop = links, stop
 
     def stop_requested(self) -> bool:
         return self._stop.is_set() or self._links.stop_requested()
 
-    def __getattr__(self, name: str):
+    def __getattr__(self, name: str) -> Any:  # every other part of the seam, as the links have it
         return getattr(self._links, name)
 
 

@@ -330,7 +330,9 @@ class LearnerConfig:
     # Also keep each periodic checkpoint as checkpoints/u<updates>.safetensors (learning curves of
     # greedy scores: `laneshift experiment checkpoints`); off: only latest/final are kept.
     keep_checkpoints: bool = False
-    prefetch: int = 4  # batches per sample request (one round trip, several updates)
+    # Batches per sample request (one round trip, several updates); fewer where the reply would pass
+    # 30 MB (pixel rows at batch 128: 3), the size above which glibc maps every buffer anew.
+    prefetch: int = 4
     torch_threads: int = 1  # torch threads for the learner's updates
     # The learner's Prometheus /metrics: -1 off, 0 a free port (local runs turn it on), else that port.
     metrics_port: int = -1
