@@ -150,6 +150,22 @@ def test_bad_input_fails_before_any_run(tmp_path, capsys):
     assert not (tmp_path / "p").exists()
 
 
+def test_a_set_that_needs_the_methods_own_setting_is_accepted_and_refused_without_it(tmp_path, capsys):
+    """A shield figure needs ``env.shield``: given with a shield method it is the method's run's
+    setting; with a method without the shield it is one line, and nothing runs."""
+    from laneshift.tools import cli
+    from laneshift.tools.studies.protocol import plan
+
+    figures = ["--set", "env.shield_gap=2.0", "--set", "env.shield_decel=1.0"]
+    args = cli.build_parser().parse_args(["experiment", "protocol", "--out", str(tmp_path / "p"), "--method",
+                                          "dqfd-bc-alongside-safe-shield", "--seeds", "0", *figures])
+    configs = plan(args)[2]
+    assert (configs[0].env.shield, configs[0].env.shield_gap, configs[0].env.shield_decel) == (True, 2.0, 1.0)
+    assert cli.main(["experiment", "protocol", "--out", str(tmp_path / "q"), "--method", "dqfd-bc", *figures]) == 2
+    assert "it needs env.shield=true" in capsys.readouterr().err
+    assert not (tmp_path / "q").exists()
+
+
 def test_the_four_roads_evaluations_pool_into_one():
     from laneshift.tools.studies.allroads import merge_evals
 

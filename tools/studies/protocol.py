@@ -128,7 +128,9 @@ def plan(args: argparse.Namespace) -> tuple[Path, str, dict[int, RunConfig], dic
         raise ConfigError(f"--road: a name for file names (no '/', no surrounding spaces), got {args.road!r}")
     every = args.env_steps // 10 if args.validation_every is None else args.validation_every
     shortcuts = {"env.scenario": args.scenario, "actor.workers": args.workers, **user}
-    base = load_run_config(args.config, shortcuts)
+    # Checked with the method's settings under the user's: a --set that needs one of them (a shield
+    # figure needs the method's env.shield) is valid here as it is in each seed's config.
+    base = load_run_config(args.config, {**method_settings(args.method, "--method"), **shortcuts})
     protocol = {"train.eval_every": every, "train.periodic_eval_episodes": args.validation_episodes,
                 "train.validation_seed": VALIDATION_SEED}
 
