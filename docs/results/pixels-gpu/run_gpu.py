@@ -42,25 +42,39 @@ RECIPE = {
 METHOD = "dqfd-bc-anneal"
 
 
-def seed_config(seed: int, env_steps: int, run_dir: Path, device: str, user: dict[str, str]):
+def seed_config(args: argparse.Namespace, run_dir: Path, extra: dict[str, str] | None = None):
+    """Seed ``args.one``'s config: the method, the recipe, ``--set`` (and ``extra``) over it; the
+    scripted pixel shard found (or made) under ``<runs>/demos``."""
     from laneshift.config import load_run_config, method_settings
+    from laneshift.deploy.run_dir import ensure_demo_shard
+    from laneshift.tools.argtypes import parse_set
 
-    return load_run_config(overrides={
-        **method_settings(METHOD, "--method"), **RECIPE, **user, "learner.device": device,
-        "train.run_dir": str(run_dir), "train.env_steps": env_steps, "train.seed": seed, "actor.seed": seed,
-        "learner.seed": seed, "replay.seed": seed, "transport.run_id": f"{METHOD}-s{seed}"})
+    seed = args.one
+    cfg = load_run_config(overrides={
+        **method_settings(METHOD, "--method"), **RECIPE, **parse_set(args.set), **(extra or {}),
+        "learner.device": args.device, "train.run_dir": str(run_dir), "train.env_steps": args.env_steps,
+        "train.seed": seed, "actor.seed": seed, "learner.seed": seed, "replay.seed": seed,
+        "transport.run_id": f"{METHOD}-s{seed}"})
+    return ensure_demo_shard(cfg, sys.stdout)
+
+
+def write_summary(args: argparse.Namespace, run_dir: Path, summary: dict) -> int:
+    """``<run dir>/summary.json`` with the device and torch beside ``summary``; its head on stdout."""
+    import torch
+
+    summary = {"seed": args.one, **summary, "torch": torch.__version__,
+               "device": torch.cuda.get_device_name(0) if args.device == "cuda" else "cpu"}
+    (run_dir / "summary.json").write_text(json.dumps(summary, indent=1, default=str))
+    print(json.dumps({k: summary[k] for k in ("seed", "wall_s", "env_steps", "updates", "device")}), flush=True)
+    return 0
 
 
 def one_seed(args: argparse.Namespace) -> int:
     """One seed's run in this process; its summary as JSON in ``<run dir>/summary.json``."""
-    import torch
-
     from laneshift.deploy.inprocess import train_inprocess
-    from laneshift.deploy.run_dir import ensure_demo_shard
 
     run_dir = Path(args.runs) / f"seed{args.one}"
-    user = dict(item.split("=", 1) for item in args.set)
-    cfg = ensure_demo_shard(seed_config(args.one, args.env_steps, run_dir, args.device, user), sys.stdout)
+    cfg = seed_config(args, run_dir)
     stop = threading.Event()
     deadline = threading.Timer(args.seconds, stop.set)
     deadline.start()
@@ -68,14 +82,10 @@ def one_seed(args: argparse.Namespace) -> int:
     result = train_inprocess(cfg, stop)
     wall = time.perf_counter() - started
     deadline.cancel()
-    device = torch.cuda.get_device_name(0) if args.device == "cuda" else "cpu"
-    summary = {"seed": args.one, "wall_s": round(wall, 1), "stopped_by_deadline": stop.is_set(),
-               "env_steps": sum(w["env_steps"] for w in result["workers"]), "updates": result["updates"],
-               "learner": result["learner"], "device": device, "torch": torch.__version__,
-               "replay_inserted": result["replay"]["tables"]["online"]["inserted"]}
-    (run_dir / "summary.json").write_text(json.dumps(summary, indent=1, default=str))
-    print(json.dumps({k: summary[k] for k in ("seed", "wall_s", "env_steps", "updates", "device")}), flush=True)
-    return 0
+    return write_summary(args, run_dir, {
+        "wall_s": round(wall, 1), "stopped_by_deadline": stop.is_set(),
+        "env_steps": sum(w["env_steps"] for w in result["workers"]), "updates": result["updates"],
+        "learner": result["learner"], "replay_inserted": result["replay"]["tables"]["online"]["inserted"]})
 
 
 def one_seed_processes(args: argparse.Namespace) -> int:
@@ -83,17 +93,12 @@ def one_seed_processes(args: argparse.Namespace) -> int:
     too), ``laneshift learner`` and ``actor.workers`` x ``laneshift worker``; at the deadline the
     workers get SIGTERM (each sends its last batch), then the learner (its final checkpoint), then
     the replay server. Its summary in ``<run dir>/summary.json``."""
-    import torch
-
     from laneshift import transport
     from laneshift.config import save_run_config
     from laneshift.deploy.processes import ProcessGroup, terminate, wait_for_file
-    from laneshift.deploy.run_dir import ensure_demo_shard
 
     run_dir = Path(args.runs) / f"seed{args.one}"
-    user = dict(item.split("=", 1) for item in args.set)
-    user["transport.router"] = f"tcp/127.0.0.1:{transport.free_tcp_port()}"
-    cfg = ensure_demo_shard(seed_config(args.one, args.env_steps, run_dir, args.device, user), sys.stdout)
+    cfg = seed_config(args, run_dir, {"transport.router": f"tcp/127.0.0.1:{transport.free_tcp_port()}"})
     config = save_run_config(cfg, run_dir / "config.yaml")
     group = ProcessGroup(run_dir / "logs")
     laneshift = [sys.executable, "-m", "laneshift"]
@@ -125,13 +130,10 @@ def one_seed_processes(args: argparse.Namespace) -> int:
         summaries.append(json.loads(lines[-1]) if lines else {"name": name, "env_steps": 0, "missing": True})
     records = [json.loads(ln) for ln in (run_dir / "metrics.jsonl").read_text().splitlines() if ln.startswith("{")]
     last = next((r for r in reversed(records) if "updates" in r), {})
-    summary = {"seed": args.one, "mode": "processes", "wall_s": round(wall, 1), "stopped_by_deadline": stopped_by_deadline,
-               "env_steps": sum(w.get("env_steps", 0) for w in summaries), "updates": last.get("updates"),
-               "learner": last, "workers": summaries, "device": torch.cuda.get_device_name(0) if args.device == "cuda"
-               else "cpu", "torch": torch.__version__}
-    (run_dir / "summary.json").write_text(json.dumps(summary, indent=1, default=str))
-    print(json.dumps({k: summary[k] for k in ("seed", "wall_s", "env_steps", "updates", "device")}), flush=True)
-    return 0
+    return write_summary(args, run_dir, {
+        "mode": "processes", "wall_s": round(wall, 1), "stopped_by_deadline": stopped_by_deadline,
+        "env_steps": sum(w.get("env_steps", 0) for w in summaries), "updates": last.get("updates"),
+        "learner": last, "workers": summaries})
 
 
 def main() -> int:
