@@ -14,6 +14,7 @@ from __future__ import annotations
 import io
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -141,15 +142,16 @@ def test_replay_server_killed_near_the_end_loses_nothing(tmp_path):
 
 def test_replay_server_killed_while_writing_a_checkpoint_loses_nothing(tmp_path):
     """Checkpoints back to back; the server is stopped (SIGSTOP) until one is seen in the middle of
-    its copy, then killed: the restart restores the last whole one and replays the log after its
-    cut, so the batches the copy caught in part are all back (they used to be dropped, or lost
-    uncounted)."""
+    its copy with batches logged after the last whole one's cut (``checkpointing``), then killed:
+    the restart restores the last whole one and replays the log after its cut, so the batches the
+    copy caught in part are all back (they used to be dropped, or lost uncounted)."""
     run_dir = tmp_path / "run"
     run_dir_, summary, replay, text = run_with_fault(
         tmp_path, "replay-server", at_steps=2000, extra=lambda: (run_dir / "replay_checkpoint" / "meta.json").exists(),
         when_stopped=checkpointing(run_dir), **FAULTS["replay-during-checkpoint"]["overrides"])
     log = (run_dir / "logs" / "replay-server.log").read_text()
-    assert "a checkpoint the previous process died writing" in log and "from the write-ahead log" in log, log
+    replayed = re.search(r"replayed (\d+) batches \(\d+ items\) from the write-ahead log", log)
+    assert "a checkpoint the previous process died writing" in log and replayed and int(replayed[1]) > 0, log
     # While the server was stopped the workers went on sending (up to their window of 64
     # unacknowledged batches each); what the router queued for it died with it, and came again
     # from the workers' buffers.

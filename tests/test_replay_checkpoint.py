@@ -546,3 +546,27 @@ def test_a_new_env_field_left_at_its_default_keeps_the_checkpoint_digest_of_befo
     assert config_digest(load_run_config(overrides=merge)) == "d8431e9c1da4e976"
     # Set, it is part of the digest: another observation layout is another table.
     assert config_digest(load_run_config(overrides={**merge, "env.alongside_features": True})) != "d8431e9c1da4e976"
+
+
+def test_the_fault_suites_mid_checkpoint_moment_needs_a_batch_logged_after_the_cut(tmp_path):
+    """The fault test that kills the server in the middle of a checkpoint must find batches in the
+    log after the last whole checkpoint's cut, or the restart has nothing to replay (CI met that:
+    the workers were held by the replay ratio, and the kill landed in the cut itself, where an
+    empty segment had been removed and the next not yet made). ``checkpointing`` holds only then."""
+    from laneshift.tools.chaos.strikes import checkpointing
+
+    run_dir = tmp_path / "run"
+    ckpt = run_dir / "replay_checkpoint"
+    core = ReplayCore(ReplayConfig(capacity=1_000, min_size=1), SCHEMA)
+    core.wal = W.WriteAheadLog(W.directory_for(ckpt), "write", {}, 0, first_gen=1)
+    mid_checkpoint = checkpointing(run_dir)
+    assert receive(core, batch(0)) is None
+    (run_dir / "replay_checkpoint.tmp").mkdir(parents=True)
+    assert not mid_checkpoint()  # no whole checkpoint yet: nothing to restore it against
+    write_checkpoint(core, ckpt, core.wal)  # batch 0 is in it; the log starts a new segment
+    (run_dir / "replay_checkpoint.tmp").mkdir()
+    assert not mid_checkpoint()  # the segment after the cut holds its header only
+    assert receive(core, batch(1)) is None
+    assert mid_checkpoint()
+    (run_dir / "replay_checkpoint.tmp").rmdir()
+    assert not mid_checkpoint()  # no checkpoint being written

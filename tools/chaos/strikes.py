@@ -11,7 +11,8 @@ Each is a ``Strike``: a daemon thread with a deadline, a ``stop()`` that ends it
 and the recovery seconds it measured (``recovery_s``, None when the run did not recover).
 
 Room: the tools (the fault suite). May import: the contract, ``laneshift.actors.envs`` (a stats
-flood's observation shape) and the standard library.
+flood's observation shape), ``laneshift.replay_server.wal`` (what the replay server's log holds)
+and the standard library.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from pathlib import Path
 from typing import Any, Callable, ClassVar
 
 from laneshift.config import load_run_config
+from laneshift.replay_server import wal as wal_log
 
 
 def logged_env_steps(run_dir: Path) -> tuple[int, int]:
@@ -67,8 +69,29 @@ def _recovery_s(run_dir: Path, before: tuple[int, int], since: float, deadline: 
 
 
 def checkpointing(run_dir: Path) -> Callable[[], bool]:
-    """True while the replay server is writing a checkpoint (its temp dir exists until the rename)."""
-    return lambda: (run_dir / "replay_checkpoint.tmp").is_dir()
+    """True while the replay server is writing a checkpoint (its temp dir exists until the rename)
+    and its write-ahead log holds a batch after the last whole checkpoint's cut: the batches a kill
+    in the middle of the copy puts to the test. (Without one the restart has nothing to replay; CI
+    met that: the workers were held by the replay ratio, and the kill landed in the cut, between
+    the removal of the empty segment before it and the creation of the next.)"""
+    unfinished = run_dir / "replay_checkpoint.tmp"
+    return lambda: unfinished.is_dir() and _logged_after_cut(run_dir / "replay_checkpoint")
+
+
+def _logged_after_cut(checkpoint_dir: Path) -> bool:
+    """Whether a segment of the log from the checkpoint's ``wal_from`` on holds a batch."""
+    try:
+        wal_from = int(json.loads((checkpoint_dir / "meta.json").read_text()).get("wal_from") or 0)
+    except (OSError, ValueError):  # between the two renames that put a checkpoint in place
+        return False
+    for gen, path in wal_log.segments(wal_log.directory_for(checkpoint_dir)):
+        try:
+            records = wal_log.scan(path.read_bytes())[0] if gen >= wal_from else []
+        except OSError:  # deleted as it was read
+            continue
+        if any(kind == wal_log.TRANSITIONS for kind, _, _ in records):
+            return True
+    return False
 
 
 def _reached(run_dir: Path, steps: int) -> Callable[[], bool]:
