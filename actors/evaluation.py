@@ -69,13 +69,16 @@ class Recorder(Protocol):
 
 
 def evaluate_policy(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig, episodes: int,
-                    seed: int = 0, progress: str | None = None, recorder: Recorder | None = None) -> dict:
+                    seed: int = 0, progress: str | None = None, recorder: Recorder | None = None,
+                    outcomes: list[dict] | None = None) -> dict:
     """``make_policy(env)`` returns the policy (obs -> action) to evaluate on that env; scripted
     drivers read the env's state, a network ignores it: ``lambda env: greedy``.
 
     ``progress``: the label of a progress bar on stderr (:mod:`laneshift.progress`); None: quiet.
     ``recorder``: shown the first ``recorder.episodes`` of these very episodes (same seeds, same
-    actions: drawing reads the state, changes nothing); None: no env draws anything it need not."""
+    actions: drawing reads the state, changes nothing); None: no env draws anything it need not.
+    ``outcomes``: each episode's outcome is appended to it (:func:`episode_outcome`), so that two
+    policies can be compared episode by episode on the same seeds."""
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, not {episodes}")
     env = make_env(env_cfg) if recorder is None else make_env(env_cfg, render_mode="rgb_array")
@@ -91,7 +94,7 @@ def evaluate_policy(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig
                                disable=progress is None):
             obs, info = env.reset(seed=seed + ep)
             start_lane = info.get("lane_index")
-            total, steps, done = 0.0, 0, False
+            total, steps, done, shielded_before = 0.0, 0, False, shielded
             recording = recorder is not None and ep < recorder.episodes
             if recording:
                 recorder.frame(ep, 0, env, False)  # type: ignore[union-attr]
@@ -111,6 +114,9 @@ def evaluate_policy(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig
                 recorder.episode_end(ep, seed + ep, steps, {  # type: ignore[union-attr]
                     "start_lane": start_lane, "survived": not crashed,
                     "on_target_lane": bool(info.get("on_target_lane", False)), "return": total})
+            if outcomes is not None:
+                outcomes.append(episode_outcome(seed + ep, start_lane, steps, total, crashed, info,
+                                                shielded - shielded_before))
             if crashed and start_lane is not None:
                 kind = crashes.setdefault("offroad" if info.get("offroad") else "collision", {})
                 kind[f"start lane {start_lane}"] = kind.get(f"start lane {start_lane}", 0) + 1
@@ -129,6 +135,19 @@ def evaluate_policy(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig
     if env_cfg.policy_vehicles:  # how safely the copies of the policy drove the traffic
         result["policy_vehicle_crashes_per_episode"] = npc_crashes / episodes
     return result
+
+
+def episode_outcome(seed: int, start_lane: int | None, steps: int, total: float, crashed: bool, info: dict,
+                    shielded_steps: int) -> dict:
+    """One greedy episode, as ``laneshift eval --episodes-out`` writes it: its reset seed, the lane
+    it started and ended in, its length and return, whether it survived and achieved the change,
+    how it crashed (``collision`` / ``offroad``; None) and the steps the shield replaced."""
+    end_lane = info.get("lane_index")
+    return {"seed": seed, "start_lane": start_lane, "end_lane": None if end_lane is None else int(end_lane),
+            "steps": steps, "return": round(total, 4), "survived": not crashed,
+            "achieved": (not crashed) and bool(info.get("on_target_lane", False)),
+            "crash": ("offroad" if info.get("offroad") else "collision") if crashed else None,
+            "shielded_steps": shielded_steps}
 
 
 def evaluate_lanes(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig, episodes: int, seed: int,
@@ -246,7 +265,8 @@ def _shape_hint(trained: tuple[int, ...], given: tuple[int, ...]) -> str:
 
 
 def evaluate_checkpoint(checkpoint: str | Path, env_cfg: EnvConfig, episodes: int, seed: int = 0,
-                        progress: str | None = None, recorder: Recorder | None = None) -> dict:
+                        progress: str | None = None, recorder: Recorder | None = None,
+                        outcomes: list[dict] | None = None) -> dict:
     """:func:`evaluate_policy` of a checkpoint's greedy policy; ValueError (saying what fits) when
     it was trained on observations of another shape than ``env_cfg``'s env gives."""
     from .envs import spec_of
@@ -257,7 +277,8 @@ def evaluate_checkpoint(checkpoint: str | Path, env_cfg: EnvConfig, episodes: in
         raise ValueError(f"checkpoint {checkpoint} was trained on observations of shape {ckpt.obs_shape}, "
                          f"the env gives {expected}{_shape_hint(ckpt.obs_shape, expected)}")
     greedy = ckpt.greedy()
-    return evaluate_policy(lambda env: greedy, env_cfg, episodes, seed, progress=progress, recorder=recorder)
+    return evaluate_policy(lambda env: greedy, env_cfg, episodes, seed, progress=progress, recorder=recorder,
+                           outcomes=outcomes)
 
 
 def format_result(r: dict) -> str:

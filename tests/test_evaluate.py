@@ -113,3 +113,27 @@ def test_the_policy_vehicles_are_driven_by_the_network_under_evaluation(tmp_path
     evaluate_policy(lambda env: greedy, cfg, episodes=1, seed=3)
     assert rows_seen and max(rows_seen) > 1  # the ego's calls are one row; the traffic's are several
     assert evaluate_policy(lambda env: greedy, EnvConfig(scenario="straight", max_steps=5), 1, seed=3)["episodes"] == 1
+
+
+def test_each_episodes_outcome_is_written_and_adds_up_to_the_rates(tmp_path, capsys):
+    """``laneshift eval --episodes-out``: a line per episode, on the seeds the rates came from, so
+    two policies (here the scripted driver and one that always turns left) compare episode by
+    episode; the lines add up to the printed rates."""
+    import json
+
+    from laneshift.tools.cli import main
+
+    out = tmp_path / "driver.jsonl"
+    assert main(["eval", "--driver", "scripted", "--scenario", "straight", "--episodes", "4", "--seed", "7",
+                 "--max-steps", "60", "--initial-lane", "non-target", "--episodes-out", str(out), "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    driver = [json.loads(line) for line in out.read_text().splitlines()]
+    assert [o["seed"] for o in driver] == [7, 8, 9, 10] and result["episodes_out"] == str(out)
+    assert sum(o["survived"] for o in driver) / 4 == result["survival_rate"]
+    assert sum(o["achieved"] for o in driver) / 4 == result["achievement_rate"]
+    left: list[dict] = []
+    r = evaluate_policy(lambda env: (lambda obs: 1), EnvConfig(scenario="straight", max_steps=200,
+                                                               initial_lane="non-target"), 4, seed=7, outcomes=left)
+    assert [o["start_lane"] for o in left] == [o["start_lane"] for o in driver]  # the same episodes
+    assert all(not o["survived"] and not o["achieved"] and o["crash"] in ("collision", "offroad") for o in left)
+    assert r["survival_rate"] == 0.0 and all(o["steps"] < 200 for o in left)

@@ -1,5 +1,6 @@
-"""``laneshift eval`` (a checkpoint's greedy evaluation: rates, an animated GIF, the agreement with
-a demo shard, the LKA response; the env taken from the checkpoint where the user chose none) and
+"""``laneshift eval`` (a checkpoint's greedy evaluation, or the scripted driver's: rates, each
+episode's outcome, an animated GIF, the agreement with a demo shard, the LKA response; the env taken
+from the checkpoint where the user chose none) and
 ``laneshift replay inspect`` (a running replay server's stats).
 
 Room: the tools (the laneshift command). May import: anything in laneshift.
@@ -22,7 +23,7 @@ def _eval(args: argparse.Namespace) -> int:
     shortcuts = {"env.scenario": args.scenario, "env.initial_lane": args.initial_lane,
                  "env.max_steps": args.max_steps, "env.observation": args.observation}
     try:
-        picked = _eval_env_from_checkpoint(args)
+        picked = _eval_env_from_checkpoint(args) if args.checkpoint else {}
     except (ValueError, OSError) as exc:  # no such file, or not a checkpoint
         config_from(args, shortcuts)  # the config's own errors are reported first
         print(f"laneshift eval: {exc}", file=sys.stderr)
@@ -40,8 +41,22 @@ def _eval(args: argparse.Namespace) -> int:
 
             recorder = GifRecorder(args.video, episodes=min(args.video_episodes, args.episodes),
                                    fps=args.video_fps, scale=args.video_scale)
-        result = evaluate_checkpoint(args.checkpoint, env_cfg, episodes=args.episodes, seed=args.seed,
-                                     progress="eval", recorder=recorder)
+        outcomes: list[dict] | None = [] if args.episodes_out else None
+        if args.driver:  # the scripted driver on the same episodes, to compare with a network's
+            if env_cfg.is_lka or args.demo_agreement:
+                raise ValueError("--driver: the scripted driver drives the lane-change roads only, and has no "
+                                 "greedy actions to compare with a demo shard (--demo-agreement)")
+            from laneshift.actors.envs.demonstrator import ScriptedDriver
+            from laneshift.tools.studies.evaluate import evaluate_policy
+
+            result = evaluate_policy(ScriptedDriver, env_cfg, args.episodes, args.seed, progress="eval",
+                                     recorder=recorder, outcomes=outcomes)
+        else:
+            result = evaluate_checkpoint(args.checkpoint, env_cfg, episodes=args.episodes, seed=args.seed,
+                                         progress="eval", recorder=recorder, outcomes=outcomes)
+        if outcomes is not None:
+            _write_outcomes(args.episodes_out, outcomes)
+            result["episodes_out"] = str(args.episodes_out)
         if recorder is not None:
             result["video"] = recorder.write()
         if args.demo_agreement:
@@ -63,6 +78,21 @@ def _eval(args: argparse.Namespace) -> int:
         result["lka_response"] = {k: v for k, v in resp.items() if k != "trace"} | {"png": str(png)}
     print(json.dumps(result) if args.json else format_result(result))
     return 0
+
+
+def _write_outcomes(path: Path, outcomes: list[dict]) -> None:
+    """``--episodes-out``: one JSON object a line, an episode each (written whole, then renamed)."""
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text("".join(json.dumps(o) + "\n" for o in outcomes))
+    tmp.replace(path)
+
+
+def writable_file(text: str) -> Path:
+    """argparse type: a file path whose folder exists (checked before the episodes are played)."""
+    path = Path(text)
+    if path.is_dir() or not path.resolve().parent.is_dir():
+        raise argparse.ArgumentTypeError(f"{text}: not a file in an existing folder")
+    return path
 
 
 def _eval_env_from_checkpoint(args: argparse.Namespace) -> dict[str, str | bool | float]:
@@ -111,9 +141,12 @@ def _replay_inspect(args: argparse.Namespace) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("eval", help="greedy evaluation of a checkpoint (survival / achievement rates)")
-    p.add_argument("--checkpoint", required=True, help="a learner checkpoint (.safetensors), e.g. "
-                                                       "RUN_DIR/checkpoints/final.safetensors")
+    p = sub.add_parser("eval", help="greedy evaluation of a checkpoint or the scripted driver (survival / achievement rates)")
+    who = p.add_mutually_exclusive_group(required=True)
+    who.add_argument("--checkpoint", help="a learner checkpoint (.safetensors), e.g. "
+                                          "RUN_DIR/checkpoints/final.safetensors")
+    who.add_argument("--driver", choices=["scripted"],
+                     help="evaluate the scripted driver (the demonstrator) instead, on the same episodes")
     p.add_argument("--scenario", help="straight | merge | curve | roundabout | allroads | lka (default: the "
                                       "checkpoint's env, else the config's); allroads on one road: --set env.road=ROAD")
     p.add_argument("--episodes", type=positive_int, default=100, help="greedy evaluation episodes")
@@ -133,6 +166,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--video-scale", type=fraction, default=1.0, metavar="FACTOR",
                    help="--video image size factor (1: 600 x 300 pixels)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+    p.add_argument("--episodes-out", type=writable_file, metavar="PATH.jsonl",
+                   help="also write each episode's outcome, a JSON line each (seed, start and end lane, steps, "
+                        "return, survived, achieved, crash kind, shielded steps): compare policies episode by episode")
     p.add_argument("--png", help="LKA: where to write the response plot (default: next to the checkpoint)")
     p.add_argument("--demo-agreement", metavar="SHARD",
                    help="also report how often the greedy action is the demonstrator's on this demo shard's states")
