@@ -111,7 +111,9 @@ def test_checkpoint_while_inserting_has_no_torn_items(tmp_path, monkeypatch):
     fresh, done = _restart(tmp_path, capacity=5_000)
     assert done["torn"] == done["corrupt"] == 0
     assert _content(fresh) == _content(core) and fresh.actors == core.actors
-    newest = np.arange(core.online.inserted - 5_000, core.online.inserted)  # item k is the k-th inserted
+    # Item k is the k-th inserted. (Under load the writer may not fill the ring before the copies end:
+    # 2,723 items once, here.)
+    newest = np.arange(max(0, core.online.inserted - 5_000), core.online.inserted)
     assert (np.sort(assert_items_whole(fresh)) == newest).all()
 
 
