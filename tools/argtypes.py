@@ -1,6 +1,6 @@
 """The argparse pieces every command shares: the number types (``positive_int``,
 ``non_negative_int``, ``positive_float``, ``non_negative_float``, ``fraction``), ``comma_list``,
-``endpoint`` (a zenoh endpoint), ``seed_list`` (the studies' ``--seeds``), the
+``endpoint`` (a zenoh endpoint), ``new_file`` (an output file in an existing folder), ``seed_list`` (the studies' ``--seeds``), the
 ``--set SECTION.FIELD=VALUE`` option (``add_set_arg``, ``parse_set``) and the ``--config`` file with
 it (``add_config_args``, and ``config_from``: the run config they give). A bad value is an ``argparse.ArgumentTypeError`` naming what was expected, which
 the parser turns into one line and exit code 2.
@@ -18,6 +18,7 @@ library.
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 from typing import Any
 
 from laneshift.config import ConfigError, RunConfig, load_run_config
@@ -81,6 +82,14 @@ def endpoint(text: str) -> str:
     if not sep or not proto.isalnum() or not address:
         raise argparse.ArgumentTypeError(f"expected a zenoh endpoint like tcp/127.0.0.1:7447, got {text!r}")
     return text
+
+
+def new_file(text: str) -> Path:
+    """argparse type: a file to write, in a folder that exists (checked before any work is done)."""
+    path = Path(text)
+    if path.is_dir() or not path.resolve().parent.is_dir():
+        raise argparse.ArgumentTypeError(f"{text}: not a file in an existing folder")
+    return path
 
 
 def parse_set(items: list[str]) -> dict[str, str]:

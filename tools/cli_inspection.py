@@ -13,8 +13,8 @@ import json
 import sys
 from pathlib import Path
 
-from laneshift.tools.argtypes import (add_config_args, config_from, endpoint, fraction, non_negative_int, parse_set,
-                                      positive_float, positive_int)
+from laneshift.tools.argtypes import (add_config_args, config_from, endpoint, fraction, new_file, non_negative_int,
+                                      parse_set, positive_float, positive_int)
 
 
 def _eval(args: argparse.Namespace) -> int:
@@ -85,14 +85,6 @@ def _write_outcomes(path: Path, outcomes: list[dict]) -> None:
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text("".join(json.dumps(o) + "\n" for o in outcomes))
     tmp.replace(path)
-
-
-def writable_file(text: str) -> Path:
-    """argparse type: a file path whose folder exists (checked before the episodes are played)."""
-    path = Path(text)
-    if path.is_dir() or not path.resolve().parent.is_dir():
-        raise argparse.ArgumentTypeError(f"{text}: not a file in an existing folder")
-    return path
 
 
 def _eval_env_from_checkpoint(args: argparse.Namespace) -> dict[str, str | bool | float]:
@@ -166,7 +158,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--video-scale", type=fraction, default=1.0, metavar="FACTOR",
                    help="--video image size factor (1: 600 x 300 pixels)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
-    p.add_argument("--episodes-out", type=writable_file, metavar="PATH.jsonl",
+    p.add_argument("--episodes-out", type=new_file, metavar="PATH.jsonl",
                    help="also write each episode's outcome, a JSON line each (seed, start and end lane, steps, "
                         "return, survived, achieved, crash kind, shielded steps): compare policies episode by episode")
     p.add_argument("--png", help="LKA: where to write the response plot (default: next to the checkpoint)")
