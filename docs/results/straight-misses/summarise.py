@@ -37,7 +37,7 @@ def main(out: Path) -> None:
         assert all([o["seed"] for o in eps] == [o["seed"] for o in driver] for eps in nets.values()), \
             "the networks and the driver must have played the same episodes"
         missed = {s: misses(eps) for s, eps in nets.items()}
-        by_driver = misses(driver)
+        by_driver = set(misses(driver))
         every_net = set.intersection(*(set(m) for m in missed.values()))
         any_net = set.union(*(set(m) for m in missed.values()))
         crashed = {s: sum(not o["survived"] for o in eps) for s, eps in nets.items()}
@@ -54,18 +54,17 @@ def main(out: Path) -> None:
                 mine = [o for o in eps if o["start_lane"] == lane]
                 by_start.setdefault(f"start lane {lane} ({len(mine)} episodes)", {})[who] = \
                     round(100 * sum(o["achieved"] for o in mine) / len(mine), 1)
+        shared = sum(len(set(m) & by_driver) for m in missed.values())
+        total = sum(map(len, missed.values()))
         report[tag] = {"episodes": n, "achievement_by_start_lane": by_start, "missed_by_seed": {s: sorted(m) for s, m in missed.items()},
                        "missed_by_driver": sorted(by_driver), "missed_by_every_network": sorted(every_net),
                        "missed_by_some_network": sorted(any_net),
-                       "missed_by_every_network_and_the_driver": sorted(every_net & set(by_driver)),
-                       "network_misses_the_driver_also_misses": sum(len(set(m) & set(by_driver))
-                                                                    for m in missed.values()),
+                       "missed_by_every_network_and_the_driver": sorted(every_net & by_driver),
+                       "network_misses_the_driver_also_misses": shared,
                        "network_crashes": crashed, "where_network_misses_ended": ends}
         per_seed = ", ".join(str(len(missed[s])) for s in SEEDS)
-        shared = report[tag]["network_misses_the_driver_also_misses"]
-        rows.append(f"| {label} | {per_seed} ({sum(map(len, missed.values()))} in all) | {len(by_driver)} | "
-                    f"{len(every_net)} | {len(every_net & set(by_driver))} | {shared} of "
-                    f"{sum(map(len, missed.values()))} | {len(any_net | set(by_driver))} |")
+        rows.append(f"| {label} | {per_seed} ({total} in all) | {len(by_driver)} | {len(every_net)} | "
+                    f"{len(every_net & by_driver)} | {shared} of {total} | {len(any_net | by_driver)} |")
     table = ["| shield | missed by seed 0, 1, 2 | missed by the driver | missed by all 3 networks | "
              "... and by the driver | networks' misses the driver misses too | missed by any of the 4 |",
              "|---|---|---|---|---|---|---|", *rows]
