@@ -54,8 +54,10 @@ def _eval(args: argparse.Namespace) -> int:
         else:
             result = evaluate_checkpoint(args.checkpoint, env_cfg, episodes=args.episodes, seed=args.seed,
                                          progress="eval", recorder=recorder, outcomes=outcomes)
-        if outcomes is not None:
-            _write_outcomes(args.episodes_out, outcomes)
+        if outcomes is not None:  # one JSON object a line, an episode each
+            from laneshift.tools.studies.provenance import write_whole
+
+            write_whole(args.episodes_out, "".join(json.dumps(o) + "\n" for o in outcomes))
             result["episodes_out"] = str(args.episodes_out)
         if recorder is not None:
             result["video"] = recorder.write()
@@ -78,13 +80,6 @@ def _eval(args: argparse.Namespace) -> int:
         result["lka_response"] = {k: v for k, v in resp.items() if k != "trace"} | {"png": str(png)}
     print(json.dumps(result) if args.json else format_result(result))
     return 0
-
-
-def _write_outcomes(path: Path, outcomes: list[dict]) -> None:
-    """``--episodes-out``: one JSON object a line, an episode each (written whole, then renamed)."""
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text("".join(json.dumps(o) + "\n" for o in outcomes))
-    tmp.replace(path)
 
 
 def _eval_env_from_checkpoint(args: argparse.Namespace) -> dict[str, str | bool | float]:

@@ -1,6 +1,6 @@
 """Where a study's result came from, and writing it whole: the command line, the git revision of
 the code (and whether the checkout had changes), and a JSON file written to a temp name and
-renamed, so a file that exists is complete (a protocol seed's record says the seed is done).
+renamed (``write_whole``; ``write_json`` for JSON), so a file that exists is complete (a protocol seed's record says the seed is done).
 
 Room: the tools (studies). May import: the standard library.
 """
@@ -37,8 +37,13 @@ def git_revision(where: str | Path | None = None) -> dict:
         return {"revision": None, "dirty": None}
 
 
+def write_whole(path: Path, text: str) -> None:
+    """Written whole or not at all: a temp file beside it, renamed over it."""
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
 def write_json(path: Path, data: Any) -> None:
     """Written whole or not at all (a seed's file says it is done)."""
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2))
-    os.replace(tmp, path)
+    write_whole(path, json.dumps(data, indent=2))
