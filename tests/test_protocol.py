@@ -1,6 +1,7 @@
 """The evaluation protocol end to end at a tiny budget: a real training run validated on the
 validation episodes, its final network tested, the baselines on the same test episodes, the table,
-the published network with its provenance, and a second invocation that skips the finished seed;
+the published network with its provenance, a second invocation that skips the finished seed and a
+third that adds the final network's rates on validation episodes;
 the same for one network on all four roads (allroads: rows per road and initial lane, each road's
 own test episodes); and the validation-curve measures (time to a threshold, the largest drop) and
 the pooling of the four roads' evaluations on hand-made numbers.
@@ -133,6 +134,24 @@ def test_protocol_trains_tests_publishes_and_skips_a_finished_seed(tmp_path, cap
     assert f"protocol: dqfd seed 0: done ({out / 'dqfd-s0.json'}), skipped" in printed
     assert "baselines: kept from" in printed and time.monotonic() - began < 20
     assert json.loads((out / "results.json").read_text())["methods"]["dqfd"]["runs"] == [run]
+    # Again with --final-validation-episodes: the done seed's final network and the drivers on the
+    # validation episodes, added without training; the rates are `laneshift eval`'s on those episodes.
+    assert cli.main(["experiment", *argv, "--final-validation-episodes", "2"]) == 0
+    printed = capsys.readouterr().out
+    assert "done" in printed and "The same final networks on the **validation episodes**" in printed
+    results = json.loads((out / "results.json").read_text())
+    (kept,) = results["methods"]["dqfd"]["runs"]
+    assert kept["eval"] == run["eval"] and results["final_validation"]["test"]["episode_seed"] == VALIDATION_SEED
+    validated = json.loads((out / "dqfd-s0.json").read_text())["final_validation"]
+    assert validated["episodes_per_lane"] == 2 and validated["episode_seed"] == VALIDATION_SEED
+    assert results["final_validation"]["baselines"]["scripted"]["random"]["survival"]["episodes"] == 2
+    assert (out / "baselines-validation.json").is_file()
+    assert cli.main(["eval", "--checkpoint", str(out / "dqfd-s0" / "checkpoints" / "final.safetensors"),
+                     "--scenario", "straight", "--episodes", "2", "--seed", str(VALIDATION_SEED), "--max-steps", "40",
+                     "--initial-lane", "non-target", "--json"]) == 0
+    by_eval = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert by_eval["achievement_rate"] == validated["eval"]["non-target"]["achievement_rate"]
+    assert "validation episodes" in (out / "table.md").read_text()
     # Other test episodes in the same --out: refused before anything runs, naming the difference.
     other = [("4" if a == "3" else a) for a in argv]
     assert cli.main(["experiment", *other]) == 2
@@ -235,3 +254,10 @@ def test_protocol_on_allroads_tests_each_road_on_its_own_episodes(tmp_path, caps
     printed = capsys.readouterr().out
     assert "protocol: dqfd seed 0: done" in printed and printed.count("baselines: kept from") == 4
     assert json.loads((out / "results.json").read_text())["roads"] == results["roads"]
+    # With the final networks' validation: each road's own validation episodes, as the test's.
+    assert cli.main([*argv, "--final-validation-episodes", "2"]) == 0
+    validated = json.loads((out / "results.json").read_text())["final_validation"]
+    assert validated["test"]["episode_seed"] == VALIDATION_SEED and list(validated["roads"]) == list(roads)
+    assert validated["roads"]["merge"]["baselines"]["scripted"]["random"]["survival"]["episodes"] == 2
+    assert all((out / f"baselines-validation-{road}.json").is_file() for road in roads)
+    assert "| roundabout | non-target |" in (out / "table.md").read_text().split("validation episodes")[1]

@@ -100,18 +100,28 @@ def road_results(runs: list[dict], drivers_by_road: dict[str, dict[str, dict]], 
     return out
 
 
-def render_road_table(results: dict, driver_rows: tuple[str, str]) -> list[str]:
+def render_road_table(results: dict, driver_rows: tuple[str, str], intro: str | None = None) -> list[str]:
     """table.md's first part for allroads: one row per road and initial lane (then the four roads
-    pooled): the learned rates beside the two drivers', the target and the scripted comparison."""
+    pooled): the learned rates beside the two drivers', the target and the scripted comparison
+    (``intro``: the sentence above it, by default the protocol's)."""
     runs = results["methods"][results["method"]]["runs"]
-    intro = protocol_intro(results, "allroads", network="one network for the four roads, ", where="on each road its own ",
-                           episodes_note=" with the road pinned: the single-road protocol's episodes, so a row "
-                                         "compares with that road's own networks")
-    lines = [intro + f" Target: >= {TARGET['survival']:.0%} survival and >= {TARGET['achievement']:.0%} achievement "
-             f"on each road. '{ALL_FOUR}': the four roads' episodes pooled. The validation episodes below draw their "
-             f"road from their seed (seed % 4).", "",
-             *rates_head(("road", "initial lane"), (f"target {TARGET['survival']:.0%} / {TARGET['achievement']:.0%} met",
-                                                    "learned mean at/above scripted"))]
+    if intro is None:
+        intro = protocol_intro(results, "allroads", network="one network for the four roads, ",
+                               where="on each road its own ",
+                               episodes_note=" with the road pinned: the single-road protocol's episodes, so a row "
+                                             "compares with that road's own networks")
+        intro += (f" Target: >= {TARGET['survival']:.0%} survival and >= {TARGET['achievement']:.0%} achievement "
+                  f"on each road. '{ALL_FOUR}': the four roads' episodes pooled. The validation episodes below draw "
+                  f"their road from their seed (seed % 4).")
+    return [intro, "", *rates_head(("road", "initial lane"), (f"target {TARGET['survival']:.0%} / "
+                                                              f"{TARGET['achievement']:.0%} met",
+                                                              "learned mean at/above scripted")),
+            *_road_rows(results, runs, driver_rows)]
+
+
+def _road_rows(results: dict, runs: list[dict], driver_rows: tuple[str, str]) -> list[str]:
+    """One table row per road and initial lane, then the four roads pooled."""
+    lines = []
     sections = [(road, road_runs(runs, road), results["roads"][road]["baselines"]) for road in ALLROADS]
     sections.append((ALL_FOUR, runs, results["baselines"]))
     for road, road_view, base in sections:

@@ -25,6 +25,11 @@ reached 80 % and 95 %, and its largest drop below its running best after reachin
 as ``DIR/<road>-<method>-seed<N>-final.safetensors`` with a ``.json`` beside it (command line, git
 revision, resolved config, test table and the ``laneshift eval`` commands that reproduce it).
 
+``--final-validation-episodes N`` also evaluates each final network, and the drivers, on N
+validation episodes per initial-lane setting (seeds from 200,000; allroads: on each road): the
+numbers to choose between recipes or settings on, so that the test episodes serve no choice. The
+same command again with it adds them to seeds already done.
+
 ``--scenario allroads`` trains one network for the four roads and tests it on each road's own test
 episodes (the single-road protocol's, the road pinned with ``env.road``), the drivers on the same
 episodes, one table row per road and initial lane (``laneshift.tools.studies.allroads``); its published
@@ -51,9 +56,10 @@ from laneshift.config import METHODS, ConfigError, EnvConfig, RunConfig, load_ru
 from laneshift.progress import progress, write
 from laneshift.tools.argtypes import add_set_arg, fraction, non_negative_int, parse_set, positive_int, seed_list
 from laneshift.tools.studies import allroads
-from laneshift.tools.studies.evaluate import evaluate_lanes, load_greedy_policy
+from laneshift.tools.studies.evaluate import Policy, evaluate_lanes, load_greedy_policy
 from laneshift.tools.studies.protocol_publish import publish
-from laneshift.tools.studies.protocol_results import TEST_SEED, drive_baselines, render_table, road_baselines, summarise
+from laneshift.tools.studies.protocol_results import (TEST_SEED, drive_baselines, final_validation_results,
+                                                      render_table, road_baselines, summarise)
 from laneshift.tools.studies.protocol_validation import VALIDATION_SEED, plot_validation, validation_curve
 from laneshift.tools.studies.provenance import command_line, git_revision, write_json
 from laneshift.tools.studies.runs import method_config, train_logged
@@ -183,6 +189,8 @@ def run_seed(cfg: RunConfig, state: str, args: argparse.Namespace, out_dir: Path
     train_seed(cfg, state, out_dir, method)
     greedy = load_greedy_policy(run_dir / "checkpoints" / "final.safetensors")
     test_env = dataclasses.replace(cfg.env, max_steps=args.eval_max_steps)
+    final_validation = validate_final(greedy, test_env, args.final_validation_episodes,
+                                      f"validate {method} seed {seed}")
     by_road = None
     if test_env.is_allroads:  # each road's own test episodes; the protocol's numbers pool the four
         by_road = allroads.evaluate_roads(lambda env: greedy, test_env, args.test_episodes, TEST_SEED,
@@ -204,12 +212,40 @@ def run_seed(cfg: RunConfig, state: str, args: argparse.Namespace, out_dir: Path
               "eval": evals, **({"eval_by_road": by_road} if by_road is not None else {}),
               "validation": {"episode_seed": t.get("validation_seed"), "every": t["eval_every"],
                              "episodes": t["periodic_eval_episodes"], "curve": validation_curve(run_dir)},
+              **({"final_validation": final_validation} if final_validation else {}),
               "command": command_line(), "git": git_revision(), "config": config}
     write_json(out_dir / f"{method}-s{seed}.json", record)
     for where, lanes in ({"": evals} if by_road is None else {f"{r}, ": e for r, e in by_road.items()}).items():
         write(f"protocol: {method} seed {seed}: {where}" + ", ".join(
             f"{lane} survival {e['survival_rate']:.1%} achievement {e['achievement_rate']:.1%}"
             for lane, e in lanes.items()))
+    return record
+
+
+def validate_final(greedy: Policy, env_cfg: EnvConfig, episodes: int, label: str) -> dict | None:
+    """A final network on ``episodes`` validation episodes per initial lane (allroads: on each road
+    too, as its test); None for 0 episodes."""
+    if not episodes:
+        return None
+    out: dict = {"episode_seed": VALIDATION_SEED, "episodes_per_lane": episodes, "max_steps": env_cfg.max_steps}
+    if env_cfg.is_allroads:
+        by_road = allroads.evaluate_roads(lambda env: greedy, env_cfg, episodes, VALIDATION_SEED, progress=label)
+        return {**out, "eval": allroads.pooled_roads(by_road), "eval_by_road": by_road}
+    return {**out, "eval": evaluate_lanes(lambda env: greedy, env_cfg, episodes, VALIDATION_SEED, progress=label)}
+
+
+def add_final_validation(record_path: Path, cfg: RunConfig, args: argparse.Namespace) -> dict:
+    """A done seed's record, with its final network's validation rates added (and written) where this
+    command asks for them and the record has none of that many episodes."""
+    record = json.loads(record_path.read_text())
+    episodes = args.final_validation_episodes
+    if not episodes or (record.get("final_validation") or {}).get("episodes_per_lane") == episodes:
+        return record
+    greedy = load_greedy_policy(Path(cfg.train.run_dir) / "checkpoints" / "final.safetensors")
+    test_env = dataclasses.replace(cfg.env, max_steps=args.eval_max_steps)
+    record["final_validation"] = validate_final(greedy, test_env, episodes,
+                                                f"validate {args.method} seed {cfg.train.seed}")
+    write_json(record_path, record)
     return record
 
 
@@ -224,7 +260,7 @@ def run_protocol(args: argparse.Namespace) -> dict:
             state = states[seed]
             if state == "done":
                 write(f"protocol: {method} seed {seed}: done ({record}), skipped")
-                runs.append(json.loads(record.read_text()))
+                runs.append(add_final_validation(record, cfg, args))
             else:
                 if state == "resume":
                     write(f"protocol: {method} seed {seed}: continuing the unfinished run in {cfg.train.run_dir}")
@@ -244,6 +280,15 @@ def run_protocol(args: argparse.Namespace) -> dict:
     else:
         drivers = drive_baselines(env_cfg, args.test_episodes, baselines_dir)
         results = summarise(args, road, runs, drivers)
+    if args.final_validation_episodes:  # the drivers on the same validation episodes
+        episodes = args.final_validation_episodes
+        if env_cfg.is_allroads:
+            val_drivers, val_by_road = road_baselines(env_cfg, episodes, baselines_dir, VALIDATION_SEED,
+                                                      "baselines-validation")
+        else:
+            val_drivers, val_by_road = drive_baselines(env_cfg, episodes, baselines_dir, "baselines-validation.json",
+                                                       VALIDATION_SEED), None
+        results["final_validation"] = final_validation_results(args, runs, val_drivers, val_by_road, VALIDATION_SEED)
     results["command"] = command_line()
     write_json(out_dir / "results.json", results)
     table = render_table(results)
@@ -273,6 +318,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="env steps between greedy validation evaluations during training (default: "
                         f"--env-steps // 10; 0 = off; episode seeds from {VALIDATION_SEED:,})")
     p.add_argument("--validation-episodes", type=positive_int, default=20, help="episodes per validation evaluation")
+    p.add_argument("--final-validation-episodes", type=non_negative_int, default=0, metavar="N",
+                   help=f"also evaluate each final network and the drivers on N validation episodes per initial "
+                        f"lane (episode seeds from {VALIDATION_SEED:,}): the numbers to choose between recipes on "
+                        f"(0 = off; again on a finished study: adds them)")
     p.add_argument("--stability-target", type=fraction, default=0.93,
                    help="validation achievement after whose first crossing the largest drop is measured")
     p.add_argument("--out", metavar="DIR", help="where the runs, results.json, table.md and the figure go "

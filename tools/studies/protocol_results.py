@@ -1,7 +1,9 @@
 """The protocol's numbers and tables: the drivers on the test episodes (``drive_baselines``, kept
 in ``baselines.json``; allroads: per road, ``road_baselines``), ``results.json`` (``summarise``, in
 ``experiment compare``'s layout) and ``table.md`` (``render_table``: the test rates beside the
-drivers', then the validation table).
+drivers', then the validation table); with ``--final-validation-episodes``, the final networks and
+the drivers on validation episodes too (``final_validation``), the numbers a choice between recipes
+rests on.
 
 Room: the tools (studies). May import: anything in laneshift.
 """
@@ -32,10 +34,10 @@ BASELINES_FILE = "baselines.json"
 
 
 def drive_baselines(env_cfg: EnvConfig, episodes: int, out_dir: Path,
-                    filename: str = BASELINES_FILE) -> dict[str, dict]:
-    """The scripted driver and the human-like stand-in on the test episodes (per initial lane), kept
-    in ``filename`` (default ``baselines.json``) and read back from there while they are of the same
-    episodes."""
+                    filename: str = BASELINES_FILE, episode_seed: int = TEST_SEED) -> dict[str, dict]:
+    """The scripted driver and the human-like stand-in on the test episodes (per initial lane; other
+    episodes from ``episode_seed``), kept in ``filename`` (default ``baselines.json``) and read back
+    from there while they are of the same episodes."""
     from laneshift.actors.envs.demonstrator import ScriptedDriver
 
     env = dataclasses.asdict(env_cfg)
@@ -48,7 +50,7 @@ def drive_baselines(env_cfg: EnvConfig, episodes: int, out_dir: Path,
     for name, default in later.items():
         if env[name] == default:
             del env[name]
-    key = json.loads(json.dumps({"env": env, "episodes": episodes, "episode_seed": TEST_SEED}))
+    key = json.loads(json.dumps({"env": env, "episodes": episodes, "episode_seed": episode_seed}))
     path = out_dir / filename
     if path.is_file():
         try:
@@ -58,18 +60,20 @@ def drive_baselines(env_cfg: EnvConfig, episodes: int, out_dir: Path,
         if isinstance(kept, dict) and kept.get("key") == key:
             write(f"protocol: baselines: kept from {path}")
             return kept["drivers"]
-        write(f"protocol: baselines: {path} is of other test episodes; driving them again")
+        write(f"protocol: baselines: {path} is of other episodes; driving them again")
     label = "baseline scripted" + (f", {env_cfg.road}" if env_cfg.road else "")
-    drivers = {SCRIPTED_ROW: evaluate_lanes(ScriptedDriver, env_cfg, episodes, TEST_SEED, progress=label),
-               HUMAN_LIKE_ROW: human_like_lanes(env_cfg, episodes, TEST_SEED)}
+    drivers = {SCRIPTED_ROW: evaluate_lanes(ScriptedDriver, env_cfg, episodes, episode_seed, progress=label),
+               HUMAN_LIKE_ROW: human_like_lanes(env_cfg, episodes, episode_seed)}
     write_json(path, {"key": key, "drivers": drivers})
     return drivers
 
 
-def road_baselines(env_cfg: EnvConfig, episodes: int, out_dir: Path) -> tuple[dict[str, dict], dict[str, dict]]:
-    """allroads: the drivers on each road's test episodes (``baselines-<road>.json`` each), and
+def road_baselines(env_cfg: EnvConfig, episodes: int, out_dir: Path, episode_seed: int = TEST_SEED,
+                   prefix: str = "baselines") -> tuple[dict[str, dict], dict[str, dict]]:
+    """allroads: the drivers on each road's test episodes (``<prefix>-<road>.json`` each), and
     pooled over the four roads as :func:`drive_baselines` returns them."""
-    by_road = {road: drive_baselines(allroads.on_road(env_cfg, road), episodes, out_dir, f"baselines-{road}.json")
+    by_road = {road: drive_baselines(allroads.on_road(env_cfg, road), episodes, out_dir, f"{prefix}-{road}.json",
+                                     episode_seed)
                for road in allroads.ALLROADS}
     pooled_drivers = {name: allroads.pooled_roads({road: by_road[road][name] for road in allroads.ALLROADS})
                       for name in (SCRIPTED_ROW, HUMAN_LIKE_ROW)}
@@ -82,7 +86,6 @@ def summarise(args: argparse.Namespace, road: str, runs: list[dict], drivers: di
     ``baselines``) plus the per-seed validation measures and the comparison with the scripted driver;
     allroads (``drivers_by_road``): the four roads pooled there, and per road in ``roads``."""
     method = args.method
-    body = {"runs": runs, **lane_stats(runs)}
     per_seed = {}
     for run in runs:
         curve = run["validation"]["curve"]
@@ -91,40 +94,53 @@ def summarise(args: argparse.Namespace, road: str, runs: list[dict], drivers: di
             "largest_drop": stability_drop(curve, args.stability_target),
             "drop_noise": drop_noise(curve, args.stability_target),
             "validation_evaluations": len(curve), "resumed": run.get("resumed", False)}
+    validation = runs[0]["validation"] if runs else {}
+    rates = rates_summary(args, runs, drivers, drivers_by_road, TEST_SEED)
+    return {"kind": "protocol", "road": road, "scenario": args.scenario, "method": method,
+            "env_steps": args.env_steps, "seeds": [r["seed"] for r in runs],
+            "eval_episodes": args.test_episodes, "eval_max_steps": args.eval_max_steps,
+            "test": rates.pop("test"), **({"roads": rates.pop("roads")} if "roads" in rates else {}),
+            "validation": {k: validation.get(k) for k in ("episode_seed", "every", "episodes")},
+            "stability_target": args.stability_target, "thresholds": list(THRESHOLDS),
+            **rates, "per_seed": per_seed}
+
+
+def rates_summary(args: argparse.Namespace, runs: list[dict], drivers: dict[str, dict],
+                  drivers_by_road: dict[str, dict] | None, episode_seed: int, episodes: int | None = None) -> dict:
+    """The rates part of results.json: ``test`` (the episodes: ``episodes`` per lane from
+    ``episode_seed``, by default the test's), ``methods`` (the runs' ``eval``), ``baselines``,
+    ``at_or_above_scripted`` and, for allroads (``drivers_by_road``), ``roads``."""
+    method = args.method
+    body = {"runs": runs, **lane_stats(runs)}
     scripted = drivers[SCRIPTED_ROW]
     above = {lane: {m: body[lane][m]["rate"] >= scripted[lane][f"{m}_rate"] for m in ("survival", "achievement")}
              for lane in INITIAL_LANES}
-    validation = runs[0]["validation"] if runs else {}
-    test = {"episode_seed": TEST_SEED, "episodes_per_lane": args.test_episodes, "max_steps": args.eval_max_steps}
+    test = {"episode_seed": episode_seed, "episodes_per_lane": args.test_episodes if episodes is None else episodes,
+            "max_steps": args.eval_max_steps}
     extra = {}
     if drivers_by_road is not None:
         test["roads"] = list(allroads.ALLROADS)
         extra["roads"] = allroads.road_results(runs, drivers_by_road, method, SCRIPTED_ROW)
-    return {"kind": "protocol", "road": road, "scenario": args.scenario, "method": method,
-            "env_steps": args.env_steps, "seeds": [r["seed"] for r in runs],
-            "eval_episodes": args.test_episodes, "eval_max_steps": args.eval_max_steps,
-            "test": test, **extra,
-            "validation": {k: validation.get(k) for k in ("episode_seed", "every", "episodes")},
-            "stability_target": args.stability_target, "thresholds": list(THRESHOLDS),
-            "methods": {method: body},
-            "baselines": driven_rates(drivers),
-            "per_seed": per_seed, "at_or_above_scripted": above}
+    return {"test": test, **extra, "methods": {method: body}, "baselines": driven_rates(drivers),
+            "at_or_above_scripted": above}
 
 
 def render_table(results: dict) -> str:
     """table.md: the test rates per initial lane beside the baselines' (allroads: per road and initial
-    lane), then per seed the time to the validation thresholds and the stability figure."""
+    lane), then the final networks' validation rates where measured, then per seed the time to the
+    validation thresholds and the stability figure."""
     if "roads" in results:
         lines = allroads.render_road_table(results, (SCRIPTED_ROW, HUMAN_LIKE_ROW))
     else:
         lines = rates_table(results)
-    return "\n".join(lines + validation_table(results)) + "\n"
+    return "\n".join(lines + final_validation_table(results) + validation_table(results)) + "\n"
 
 
-def rates_table(results: dict) -> list[str]:
-    """table.md's first part: the test rates per initial lane beside the baselines'."""
+def rates_table(results: dict, intro: str | None = None) -> list[str]:
+    """table.md's first part: the test rates per initial lane beside the baselines' (``intro``: the
+    sentence above it, by default the protocol's)."""
     runs = results["methods"][results["method"]]["runs"]
-    lines = [protocol_intro(results, results["road"]), "",
+    lines = [protocol_intro(results, results["road"]) if intro is None else intro, "",
              *rates_head(("initial lane",), ("learned mean at/above scripted",))]
     base = results["baselines"]
     for lane in INITIAL_LANES:
@@ -134,3 +150,34 @@ def rates_table(results: dict) -> list[str]:
         verdict = ", ".join(f"{m} {'yes' if above[m] else 'no'}" for m in ("survival", "achievement"))
         lines.append(f"| {lane} | " + " | ".join(cells) + f" | {verdict} |")
     return lines
+
+
+def final_validation_results(args: argparse.Namespace, runs: list[dict], drivers: dict[str, dict],
+                             drivers_by_road: dict[str, dict] | None, episode_seed: int) -> dict:
+    """results.json's ``final_validation``: the final networks (each run's ``final_validation``) and
+    the drivers on the validation episodes, in the layout of the test's rates (``test`` names the
+    episodes; ``methods``' runs hold each seed's evaluations only)."""
+    kept = ("eval", "eval_by_road")
+    views = [{"seed": run["seed"], **{k: v for k, v in run["final_validation"].items() if k in kept}} for run in runs]
+    return rates_summary(args, views, drivers, drivers_by_road, episode_seed,
+                         runs[0]["final_validation"]["episodes_per_lane"])
+
+
+def final_validation_table(results: dict) -> list[str]:
+    """table.md's part on the final networks' validation rates (empty where not measured): the same
+    columns as the test's, on the episodes that choices between recipes are made on."""
+    val = results.get("final_validation")
+    if not val:
+        return []
+    view = {**results, **val}
+    first, count = val["test"]["episode_seed"], val["test"]["episodes_per_lane"]
+    where = "on each road its own " if "roads" in val else ""
+    intro = (f"The same final networks on the **validation episodes** ({where}{count} per initial lane, episode "
+             f"seeds {first:,}-{first + count - 1:,}, {val['test']['max_steps']} steps each; the drivers drive them "
+             f"too): "
+             f"the numbers a choice between recipes or settings rests on, never the test rates above.")
+    if "roads" in val:
+        lines = allroads.render_road_table(view, (SCRIPTED_ROW, HUMAN_LIKE_ROW), intro=intro)
+    else:
+        lines = rates_table(view, intro=intro)
+    return ["", *lines]
