@@ -94,6 +94,7 @@ def evaluate_policy(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig
                                disable=progress is None):
             obs, info = env.reset(seed=seed + ep)
             start_lane = info.get("lane_index")
+            lane, lane_changes = start_lane, []  # the steps after which the car was in another lane
             total, steps, done, shielded_before = 0.0, 0, False, shielded
             recording = recorder is not None and ep < recorder.episodes
             if recording:
@@ -104,6 +105,9 @@ def evaluate_policy(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig
                 steps += 1
                 shielded += bool(info.get("shielded", False))
                 done = terminated or truncated
+                if outcomes is not None and info.get("lane_index") != lane:
+                    lane = info.get("lane_index")
+                    lane_changes.append(steps)
                 if recording:
                     recorder.frame(ep, steps, env, done)  # type: ignore[union-attr]
             crashed = bool(info.get("crashed", terminated))  # LKA: terminated = left the lane
@@ -116,7 +120,7 @@ def evaluate_policy(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig
                     "on_target_lane": bool(info.get("on_target_lane", False)), "return": total})
             if outcomes is not None:
                 outcomes.append(episode_outcome(seed + ep, start_lane, steps, total, crashed, info,
-                                                shielded - shielded_before))
+                                                shielded - shielded_before, lane_changes))
             if crashed and start_lane is not None:
                 kind = crashes.setdefault("offroad" if info.get("offroad") else "collision", {})
                 kind[f"start lane {start_lane}"] = kind.get(f"start lane {start_lane}", 0) + 1
@@ -138,16 +142,18 @@ def evaluate_policy(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig
 
 
 def episode_outcome(seed: int, start_lane: int | None, steps: int, total: float, crashed: bool, info: dict,
-                    shielded_steps: int) -> dict:
+                    shielded_steps: int, lane_changes: list[int] | None = None) -> dict:
     """One greedy episode, as ``laneshift eval --episodes-out`` writes it: its reset seed, the lane
     it started and ended in, its length and return, whether it survived and achieved the change,
-    how it crashed (``collision`` / ``offroad``; None) and the steps the shield replaced."""
+    how it crashed (``collision`` / ``offroad``; None), the steps the shield replaced and the steps
+    after which it was in another lane than before (``lane_changes``: when a change came, so that a
+    late one tells from none)."""
     end_lane = info.get("lane_index")
     return {"seed": seed, "start_lane": start_lane, "end_lane": None if end_lane is None else int(end_lane),
             "steps": steps, "return": round(total, 4), "survived": not crashed,
             "achieved": (not crashed) and bool(info.get("on_target_lane", False)),
             "crash": ("offroad" if info.get("offroad") else "collision") if crashed else None,
-            "shielded_steps": shielded_steps}
+            "shielded_steps": shielded_steps, "lane_changes": list(lane_changes or [])}
 
 
 def evaluate_lanes(make_policy: Callable[[gym.Env], Policy], env_cfg: EnvConfig, episodes: int, seed: int,

@@ -131,6 +131,12 @@ def test_each_episodes_outcome_is_written_and_adds_up_to_the_rates(tmp_path, cap
     assert [o["seed"] for o in driver] == [7, 8, 9, 10] and result["episodes_out"] == str(out)
     assert sum(o["survived"] for o in driver) / 4 == result["survival_rate"]
     assert sum(o["achieved"] for o in driver) / 4 == result["achievement_rate"]
+    # When the lane changed: one step per change, in order, inside the episode; a car that ended in
+    # another lane than it started in changed at least once.
+    for o in driver:
+        assert o["lane_changes"] == sorted(o["lane_changes"]) and all(0 < s <= o["steps"] for s in o["lane_changes"])
+        assert (o["end_lane"] != o["start_lane"]) <= bool(o["lane_changes"])
+    assert any(o["lane_changes"] for o in driver)  # the driver changes lanes from a non-target lane
     left: list[dict] = []
     r = evaluate_policy(lambda env: (lambda obs: 1), EnvConfig(scenario="straight", max_steps=200,
                                                                initial_lane="non-target"), 4, seed=7, outcomes=left)
