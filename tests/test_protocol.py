@@ -152,6 +152,13 @@ def test_protocol_trains_tests_publishes_and_skips_a_finished_seed(tmp_path, cap
     by_eval = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert by_eval["achievement_rate"] == validated["eval"]["non-target"]["achievement_rate"]
     assert "validation episodes" in (out / "table.md").read_text()
+    # More validation episodes on a study whose run dirs are gone: one line, the record kept as it was.
+    record = (out / "dqfd-s0.json").read_text()
+    (out / "dqfd-s0" / "checkpoints" / "final.safetensors").rename(tmp_path / "final.safetensors")
+    assert cli.main(["experiment", *argv, "--final-validation-episodes", "3"]) == 2
+    assert "needs the run's final network" in capsys.readouterr().err
+    assert (out / "dqfd-s0.json").read_text() == record
+    (tmp_path / "final.safetensors").rename(out / "dqfd-s0" / "checkpoints" / "final.safetensors")
     # Other test episodes in the same --out: refused before anything runs, naming the difference.
     other = [("4" if a == "3" else a) for a in argv]
     assert cli.main(["experiment", *other]) == 2

@@ -241,7 +241,11 @@ def add_final_validation(record_path: Path, cfg: RunConfig, args: argparse.Names
     episodes = args.final_validation_episodes
     if not episodes or (record.get("final_validation") or {}).get("episodes_per_lane") == episodes:
         return record
-    greedy = load_greedy_policy(Path(cfg.train.run_dir) / "checkpoints" / "final.safetensors")
+    final = Path(cfg.train.run_dir) / "checkpoints" / "final.safetensors"
+    if not final.is_file():
+        raise ConfigError(f"seed {cfg.train.seed}: --final-validation-episodes needs the run's final network, and "
+                          f"{final} is not there")
+    greedy = load_greedy_policy(final)
     test_env = dataclasses.replace(cfg.env, max_steps=args.eval_max_steps)
     record["final_validation"] = validate_final(greedy, test_env, episodes,
                                                 f"validate {args.method} seed {cfg.train.seed}")
