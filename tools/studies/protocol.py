@@ -58,8 +58,8 @@ from laneshift.tools.argtypes import add_set_arg, fraction, non_negative_int, pa
 from laneshift.tools.studies import allroads
 from laneshift.tools.studies.evaluate import Policy, evaluate_lanes, load_greedy_policy
 from laneshift.tools.studies.protocol_publish import publish
-from laneshift.tools.studies.protocol_results import (TEST_SEED, drive_baselines, final_validation_results,
-                                                      render_table, road_baselines, summarise)
+from laneshift.tools.studies.protocol_results import (TEST_SEED, drivers_on, final_validation_results, render_table,
+                                                      summarise)
 from laneshift.tools.studies.protocol_validation import VALIDATION_SEED, plot_validation, validation_curve
 from laneshift.tools.studies.provenance import command_line, git_revision, write_json
 from laneshift.tools.studies.runs import method_config, train_logged
@@ -191,14 +191,8 @@ def run_seed(cfg: RunConfig, state: str, args: argparse.Namespace, out_dir: Path
     test_env = dataclasses.replace(cfg.env, max_steps=args.eval_max_steps)
     final_validation = validate_final(greedy, test_env, args.final_validation_episodes,
                                       f"validate {method} seed {seed}")
-    by_road = None
-    if test_env.is_allroads:  # each road's own test episodes; the protocol's numbers pool the four
-        by_road = allroads.evaluate_roads(lambda env: greedy, test_env, args.test_episodes, TEST_SEED,
-                                          progress=f"test {method} seed {seed}")
-        evals = allroads.pooled_roads(by_road)
-    else:
-        evals = evaluate_lanes(lambda env: greedy, test_env, args.test_episodes, TEST_SEED,
-                               progress=f"test {method} seed {seed}")
+    tested = evaluate_final(greedy, test_env, args.test_episodes, TEST_SEED, f"test {method} seed {seed}")
+    evals, by_road = tested["eval"], tested.get("eval_by_road")
     try:
         summary = json.loads((run_dir / "summary.json").read_text())
     except (OSError, ValueError):
@@ -209,7 +203,7 @@ def run_seed(cfg: RunConfig, state: str, args: argparse.Namespace, out_dir: Path
               "resumed": state == "resume", "wall_s": round(time.monotonic() - started, 1),
               "train_wall_s": summary.get("wall_s"), "env_steps": summary.get("env_steps") or cfg.train.env_steps,
               "test": held_out(args, cfg.env),
-              "eval": evals, **({"eval_by_road": by_road} if by_road is not None else {}),
+              **tested,
               "validation": {"episode_seed": t.get("validation_seed"), "every": t["eval_every"],
                              "episodes": t["periodic_eval_episodes"], "curve": validation_curve(run_dir)},
               **({"final_validation": final_validation} if final_validation else {}),
@@ -222,16 +216,22 @@ def run_seed(cfg: RunConfig, state: str, args: argparse.Namespace, out_dir: Path
     return record
 
 
+def evaluate_final(greedy: Policy, env_cfg: EnvConfig, episodes: int, episode_seed: int, label: str) -> dict:
+    """A final network on ``episodes`` episodes per initial lane from ``episode_seed``: ``eval``; for
+    allroads each road's own episodes (``eval_by_road``), pooled in ``eval``."""
+    if env_cfg.is_allroads:
+        by_road = allroads.evaluate_roads(lambda env: greedy, env_cfg, episodes, episode_seed, progress=label)
+        return {"eval": allroads.pooled_roads(by_road), "eval_by_road": by_road}
+    return {"eval": evaluate_lanes(lambda env: greedy, env_cfg, episodes, episode_seed, progress=label)}
+
+
 def validate_final(greedy: Policy, env_cfg: EnvConfig, episodes: int, label: str) -> dict | None:
     """A final network on ``episodes`` validation episodes per initial lane (allroads: on each road
     too, as its test); None for 0 episodes."""
     if not episodes:
         return None
-    out: dict = {"episode_seed": VALIDATION_SEED, "episodes_per_lane": episodes, "max_steps": env_cfg.max_steps}
-    if env_cfg.is_allroads:
-        by_road = allroads.evaluate_roads(lambda env: greedy, env_cfg, episodes, VALIDATION_SEED, progress=label)
-        return {**out, "eval": allroads.pooled_roads(by_road), "eval_by_road": by_road}
-    return {**out, "eval": evaluate_lanes(lambda env: greedy, env_cfg, episodes, VALIDATION_SEED, progress=label)}
+    return {"episode_seed": VALIDATION_SEED, "episodes_per_lane": episodes, "max_steps": env_cfg.max_steps,
+            **evaluate_final(greedy, env_cfg, episodes, VALIDATION_SEED, label)}
 
 
 def add_final_validation(record_path: Path, cfg: RunConfig, args: argparse.Namespace) -> dict:
@@ -278,21 +278,11 @@ def run_protocol(args: argparse.Namespace) -> dict:
     # test episodes share (`experiment paper`'s modes), so the drivers drive them once.
     baselines_dir = Path(getattr(args, "baselines_dir", None) or out_dir)
     baselines_dir.mkdir(parents=True, exist_ok=True)
-    if env_cfg.is_allroads:
-        drivers, drivers_by_road = road_baselines(env_cfg, args.test_episodes, baselines_dir)
-        results = summarise(args, road, runs, drivers, drivers_by_road)
-    else:
-        drivers = drive_baselines(env_cfg, args.test_episodes, baselines_dir)
-        results = summarise(args, road, runs, drivers)
+    results = summarise(args, road, runs, *drivers_on(env_cfg, args.test_episodes, baselines_dir))
     if args.final_validation_episodes:  # the drivers on the same validation episodes
-        episodes = args.final_validation_episodes
-        if env_cfg.is_allroads:
-            val_drivers, val_by_road = road_baselines(env_cfg, episodes, baselines_dir, VALIDATION_SEED,
-                                                      "baselines-validation")
-        else:
-            val_drivers, val_by_road = drive_baselines(env_cfg, episodes, baselines_dir, "baselines-validation.json",
-                                                       VALIDATION_SEED), None
-        results["final_validation"] = final_validation_results(args, runs, val_drivers, val_by_road, VALIDATION_SEED)
+        drivers = drivers_on(env_cfg, args.final_validation_episodes, baselines_dir, VALIDATION_SEED,
+                             "baselines-validation")
+        results["final_validation"] = final_validation_results(args, runs, *drivers, VALIDATION_SEED)
     results["command"] = command_line()
     write_json(out_dir / "results.json", results)
     table = render_table(results)

@@ -80,6 +80,16 @@ def road_baselines(env_cfg: EnvConfig, episodes: int, out_dir: Path, episode_see
     return pooled_drivers, by_road
 
 
+def drivers_on(env_cfg: EnvConfig, episodes: int, out_dir: Path, episode_seed: int = TEST_SEED,
+               prefix: str = "baselines") -> tuple[dict[str, dict], dict[str, dict] | None]:
+    """The drivers on ``episodes`` episodes per initial lane from ``episode_seed``, kept in
+    ``<prefix>.json`` (allroads: ``<prefix>-<road>.json`` per road), and for allroads per road too
+    (None otherwise): what :func:`summarise` takes."""
+    if env_cfg.is_allroads:
+        return road_baselines(env_cfg, episodes, out_dir, episode_seed, prefix)
+    return drive_baselines(env_cfg, episodes, out_dir, f"{prefix}.json", episode_seed), None
+
+
 def summarise(args: argparse.Namespace, road: str, runs: list[dict], drivers: dict[str, dict],
               drivers_by_road: dict[str, dict] | None = None) -> dict:
     """results.json: the protocol's numbers, in ``experiment compare``'s layout (``methods``,
@@ -95,14 +105,12 @@ def summarise(args: argparse.Namespace, road: str, runs: list[dict], drivers: di
             "drop_noise": drop_noise(curve, args.stability_target),
             "validation_evaluations": len(curve), "resumed": run.get("resumed", False)}
     validation = runs[0]["validation"] if runs else {}
-    rates = rates_summary(args, runs, drivers, drivers_by_road, TEST_SEED)
     return {"kind": "protocol", "road": road, "scenario": args.scenario, "method": method,
             "env_steps": args.env_steps, "seeds": [r["seed"] for r in runs],
             "eval_episodes": args.test_episodes, "eval_max_steps": args.eval_max_steps,
-            "test": rates.pop("test"), **({"roads": rates.pop("roads")} if "roads" in rates else {}),
+            **rates_summary(args, runs, drivers, drivers_by_road, TEST_SEED),
             "validation": {k: validation.get(k) for k in ("episode_seed", "every", "episodes")},
-            "stability_target": args.stability_target, "thresholds": list(THRESHOLDS),
-            **rates, "per_seed": per_seed}
+            "stability_target": args.stability_target, "thresholds": list(THRESHOLDS), "per_seed": per_seed}
 
 
 def rates_summary(args: argparse.Namespace, runs: list[dict], drivers: dict[str, dict],
@@ -174,8 +182,7 @@ def final_validation_table(results: dict) -> list[str]:
     where = "on each road its own " if "roads" in val else ""
     intro = (f"The same final networks on the **validation episodes** ({where}{count} per initial lane, episode "
              f"seeds {first:,}-{first + count - 1:,}, {val['test']['max_steps']} steps each; the drivers drive them "
-             f"too): "
-             f"the numbers a choice between recipes or settings rests on, never the test rates above.")
+             f"too): the numbers a choice between recipes or settings rests on, never the test rates above.")
     if "roads" in val:
         lines = allroads.render_road_table(view, (SCRIPTED_ROW, HUMAN_LIKE_ROW), intro=intro)
     else:

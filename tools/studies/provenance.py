@@ -1,6 +1,7 @@
 """Where a study's result came from, and writing it whole: the command line, the git revision of
-the code (and whether the checkout had changes), and a JSON file written to a temp name and
-renamed (``write_whole``; ``write_json`` for JSON), so a file that exists is complete (a protocol seed's record says the seed is done).
+the code (and whether the checkout had changes), and a file written to a temp name and renamed
+(``write_whole``; ``write_json`` for JSON), so a file that exists is complete (a protocol seed's
+record says the seed is done).
 
 Room: the tools (studies). May import: the standard library.
 """
