@@ -201,7 +201,8 @@ def load_checkpoint_policy(checkpoint: str | Path) -> CheckpointPolicy:
     except (KeyError, ValueError):
         raise ValueError(f"checkpoint {checkpoint}: missing laneshift metadata (obs_shape, hidden, n_actions)") from None
     policy = QPolicy(obs_shape, n_actions, hidden, dueling=meta.get("dueling", "0") == "1",
-                     cnn=meta.get("cnn", "nature"))  # checkpoints from before the choice: Nature
+                     cnn=meta.get("cnn", "nature"),  # checkpoints from before the choice: Nature
+                     heads=int(meta.get("heads", "1")))
     policy.load_tensors(tensors)
     return CheckpointPolicy(policy, obs_shape, n_actions, meta)
 

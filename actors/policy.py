@@ -4,7 +4,7 @@ For vector observations the MLP runs in numpy: an env worker then never imports 
 180 MB of RSS per worker process, measured with `laneshift bench run`), and a forward pass of a
 few rows is faster than torch's per-call overhead. It reads the learner's weights by their
 state-dict names (``net.0.weight``, ..., a dueling head's ``value`` / ``advantage``) and computes
-exactly what ``laneshift.qnet.MLPQNetwork`` computes, in float32. Image observations use the
+exactly what ``laneshift.qnet.MLPQNetwork`` computes, in float32, one head per road included. Image observations use the
 torch network (the Nature CNN), imported only then.
 Room: actors, the env-running component. May import: the contract (``laneshift.wire``), numpy, threadpoolctl; torch and
 ``laneshift.qnet`` only for image observations.
@@ -25,7 +25,9 @@ from laneshift import wire
 class NumpyMLP:
     """``MLPQNetwork``'s forward pass (Linear, ReLU, ..., plain or dueling head) in numpy."""
 
-    def __init__(self, obs_dim: int, n_actions: int, hidden: tuple[int, ...], dueling: bool):
+    def __init__(self, obs_dim: int, n_actions: int, hidden: tuple[int, ...], dueling: bool, heads: int = 1):
+        if not 1 <= heads < obs_dim:
+            raise ValueError(f"heads must be in [1, {obs_dim}) (a one-hot ends the observation), got {heads}")
         self.shapes: dict[str, tuple[int, ...]] = {}
         size, index = obs_dim, 0
         for h in hidden:
@@ -33,11 +35,13 @@ class NumpyMLP:
             size, index = h, index + 2  # each hidden Linear is followed by a ReLU in the Sequential
         head = f"net.{index}"
         if dueling:
-            self.shapes.update({f"{head}.value.weight": (1, size), f"{head}.value.bias": (1,),
-                                f"{head}.advantage.weight": (n_actions, size), f"{head}.advantage.bias": (n_actions,)})
+            self.shapes.update({f"{head}.value.weight": (heads, size), f"{head}.value.bias": (heads,),
+                                f"{head}.advantage.weight": (heads * n_actions, size),
+                                f"{head}.advantage.bias": (heads * n_actions,)})
         else:
-            self.shapes.update({f"{head}.weight": (n_actions, size), f"{head}.bias": (n_actions,)})
+            self.shapes.update({f"{head}.weight": (heads * n_actions, size), f"{head}.bias": (heads * n_actions,)})
         self.hidden_layers, self.head, self.dueling = len(hidden), head, dueling
+        self.heads, self.n_actions = heads, n_actions
         # Zero weights until the learner's first version arrives (workers wait for it before acting).
         self.load({k: np.zeros(s, np.float32) for k, s in self.shapes.items()})
 
@@ -58,13 +62,19 @@ class NumpyMLP:
             self.out = (t[f"{self.head}.weight"].T.copy(), t[f"{self.head}.bias"])
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
-        h = np.asarray(obs, np.float32)
+        x = np.asarray(obs, np.float32)
+        h = x
         for w, b in self.layers:
             h = np.maximum(h @ w + b, 0.0)
+        rows, heads, n = len(h), self.heads, self.n_actions
         if not self.dueling:
-            return h @ self.out[0] + self.out[1]
-        adv = h @ self.advantage[0] + self.advantage[1]
-        return (h @ self.value[0] + self.value[1]) + adv - adv.mean(axis=1, keepdims=True)
+            q = (h @ self.out[0] + self.out[1]).reshape(rows, heads, n)
+        else:
+            adv = (h @ self.advantage[0] + self.advantage[1]).reshape(rows, heads, n)
+            q = (h @ self.value[0] + self.value[1])[:, :, None] + adv - adv.mean(axis=2, keepdims=True)
+        if heads == 1:
+            return q[:, 0]
+        return (q * x[:, -heads:, None]).sum(axis=1)  # laneshift.qnet.select_head: the one-hot's head
 
 
 class _TorchNet:
@@ -92,14 +102,16 @@ class _TorchNet:
 
 class QPolicy:
     def __init__(self, obs_shape: tuple[int, ...], n_actions: int, hidden: tuple[int, ...], seed: int = 0,
-                 dueling: bool = False, torch_threads: int = 1, cnn: str = "nature"):
+                 dueling: bool = False, torch_threads: int = 1, cnn: str = "nature", heads: int = 1):
         if len(obs_shape) == 1:
             # One BLAS thread: OpenBLAS's thread pool made a 16-row forward pass 27x slower here
             # (3.9 ms vs 0.15 ms on 2 busy cores), and a worker has one core's share anyway.
             from threadpoolctl import threadpool_limits
 
             threadpool_limits(limits=torch_threads, user_api="blas")
-            self.q = NumpyMLP(obs_shape[0], n_actions, tuple(hidden), dueling)
+            self.q = NumpyMLP(obs_shape[0], n_actions, tuple(hidden), dueling, heads)
+        elif heads != 1:
+            raise ValueError(f"heads: one Q head per road needs a vector observation (its one-hot), got {obs_shape}")
         else:
             self.q = _TorchNet(tuple(obs_shape), n_actions, tuple(hidden), dueling, torch_threads, cnn)
         self.n_actions = n_actions

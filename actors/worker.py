@@ -94,7 +94,7 @@ class Resume:
 class EnvWorker:
     def __init__(self, name: str, index: int, env_cfg: EnvConfig, actor_cfg: ActorConfig,
                  hidden: tuple[int, ...], sync: bool, rehearsal: bool, n_step: int = 1, gamma: float = 0.99,
-                 dueling: bool = False, cnn: str = "nature"):
+                 dueling: bool = False, cnn: str = "nature", heads: int = 1):
         self.name, self.index, self.cfg = name, index, actor_cfg
         self.sync, self.rehearsal = sync, rehearsal
         self.envs = [make_env(env_cfg) for _ in range(actor_cfg.envs_per_worker)]
@@ -102,7 +102,7 @@ class EnvWorker:
         check_nstep(n_step, gamma)  # a bad n or gamma is refused here, not mid-run
         space = self.envs[0].observation_space
         self.policy = QPolicy(tuple(space.shape), int(self.envs[0].action_space.n), hidden,
-                              seed=actor_cfg.seed + 7919 * index, dueling=dueling, cnn=cnn,
+                              seed=actor_cfg.seed + 7919 * index, dueling=dueling, cnn=cnn, heads=heads,
                               torch_threads=actor_cfg.torch_threads)
         self.uses_policy_vehicles = env_cfg.policy_vehicles > 0
         self.bad_weights = 0

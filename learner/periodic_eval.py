@@ -46,9 +46,9 @@ class GreedyEval:
     """
 
     def __init__(self, evaluate: EvaluatePolicy, every: int, obs_shape: tuple[int, ...],
-                 n_actions: int, hidden: tuple[int, ...], dueling: bool, cnn: str = "nature"):
+                 n_actions: int, hidden: tuple[int, ...], dueling: bool, cnn: str = "nature", heads: int = 1):
         self.evaluate, self.every = evaluate, every
-        self._net_args = (tuple(obs_shape), n_actions, tuple(hidden), dueling, cnn)
+        self._net_args = (tuple(obs_shape), n_actions, tuple(hidden), dueling, cnn, "fp32", heads)
         self.next_at = every
         self.failed: str | None = None
         self._thread: threading.Thread | None = None

@@ -234,7 +234,7 @@ BAD_VALUES = [
     ("learner.batch_size", 0), ("learner.batch_size", 8193), ("learner.hidden", ""), ("learner.hidden", "64,0"),
     ("learner.target_update_period", 0), ("learner.publish_every", 0), ("learner.updates_per_round", 0),
     ("learner.phase1_updates", 0), ("learner.checkpoint_every", 0), ("learner.prefetch", 0), ("learner.prefetch", 65),
-    ("learner.torch_threads", 0), ("learner.huber_delta", 0), ("learner.grad_clip", 0), ("learner.weight_decay", -1),
+    ("learner.torch_threads", 0), ("learner.heads", 0), ("learner.huber_delta", 0), ("learner.grad_clip", 0), ("learner.weight_decay", -1),
     ("transport.router", "127.0.0.1:7447"), ("transport.router", "http://x"), ("transport.run_id", "a/b"),
     ("transport.run_id", ""), ("transport.run_id", "x" * 65), ("transport.run_id", "a b"), ("transport.timeout_s", 0),
     ("train.env_steps", 0), ("train.parallel", "both"), ("train.log_every_s", 0), ("train.eval_episodes", -1),
@@ -253,6 +253,15 @@ def test_demo_modes_without_paths_are_valid_config(mode):
     assert load_run_config(overrides={"replay.demo_mode": mode}).replay.demo_paths == ()
     cfg = load_run_config(overrides={"replay.demo_mode": mode, "replay.demo_paths": "runs/demos/x"})
     assert cfg.replay.demo_paths == ("runs/demos/x",)
+
+
+def test_one_head_per_road_only_on_allroads_with_one_head_for_each_road():
+    from laneshift.envspec import ALLROADS
+
+    assert load_run_config(overrides={"env.scenario": "allroads", "learner.heads": len(ALLROADS)}).learner.heads == 4
+    msg = refused({"learner.heads": 4}, "learner.heads: one head per road takes env.scenario=allroads")
+    assert "'straight'" in msg
+    refused({"env.scenario": "allroads", "learner.heads": 3}, "learner.heads: one head per road")
 
 
 def test_validation_seed_below_zero_is_refused():

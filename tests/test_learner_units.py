@@ -425,6 +425,43 @@ def test_cross_entropy_on_demo_rows_teaches_the_demonstrators_action_through_a_d
     assert plain.update({**batch, "is_demo": np.zeros(64, np.uint8)})["bc_loss"] == 0.0
 
 
+def test_heads_per_road_checkpoints_load_back_with_their_heads(tmp_path):
+    from laneshift.tools.studies.evaluate import load_greedy_policy
+    from laneshift.qnet import build_q_network
+    from laneshift.qnet import save_checkpoint
+
+    torch.manual_seed(0)
+    net = build_q_network((9,), 9, (16,), dueling=True, heads=4)
+    path = save_checkpoint(net, tmp_path / "h.safetensors", {"obs_shape": "9", "hidden": "16", "n_actions": 9,
+                                                             "dueling": 1, "heads": 4})
+    greedy = load_greedy_policy(path)
+    rng = np.random.default_rng(0)
+    for road in range(4):
+        obs = np.concatenate([rng.normal(size=5), np.eye(4)[road]]).astype(np.float32)
+        with torch.no_grad():
+            assert greedy(obs) == int(net(torch.as_tensor(obs)[None]).argmax())
+
+
+def test_a_learner_with_one_head_per_road_learns_each_roads_own_action():
+    from laneshift.config import LearnerConfig
+    from laneshift.learner.dqn import DoubleDQN
+
+    # The same features, a different best action per road: only the road's one-hot tells them apart.
+    rng = np.random.default_rng(0)
+    n = 256
+    roads = rng.integers(0, 4, size=n)
+    obs = np.concatenate([rng.normal(size=(n, 4)), np.eye(4)[roads]], axis=1).astype(np.float32)
+    expert = (roads * 2).astype(np.int64)  # road r's demonstrator drives action 2r
+    batch = {"obs": obs, "action": expert, "reward": np.zeros(n, np.float32), "next_obs": obs,
+             "terminated": np.ones(n, np.uint8), "is_demo": np.ones(n, np.uint8), "steps": np.ones(n, np.uint8),
+             "weight": np.ones(n, np.float32)}
+    agent = DoubleDQN((8,), 9, LearnerConfig(hidden=(32,), lr=1e-2, seed=0, bc_loss_weight=1.0, dueling=True,
+                                             heads=4))
+    for _ in range(300):
+        agent.update(batch)
+    assert (agent.greedy(obs) == expert).mean() == 1.0
+
+
 def test_dueling_checkpoints_load_back_as_dueling_policies(tmp_path):
     from laneshift.tools.studies.evaluate import load_greedy_policy
     from laneshift.qnet import DuelingHead, build_q_network

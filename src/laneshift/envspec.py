@@ -20,6 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from .config import EnvConfig
+from .config.sections import ROADS
 from .wire import TransitionSchema
 
 
@@ -42,7 +43,7 @@ SCENARIOS: dict[str, str] = {
 
 #: The roads of scenario ``allroads`` (one network for all four), in the order of the one-hot its
 #: vector observation ends with; an episode reset with seed s drives ``ALLROADS[s % 4]``.
-ALLROADS: tuple[str, ...] = ("straight", "merge", "curve", "roundabout")
+ALLROADS: tuple[str, ...] = ROADS  # one tuple: the config checks env.road and learner.heads against it
 
 
 @dataclass(frozen=True)

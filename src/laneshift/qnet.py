@@ -3,12 +3,15 @@ evaluation share (contract floor: imports torch, numpy, safetensors-format helpe
 ``laneshift.wire``; never a component).
 
 Q-networks: an MLP for vector observations, the Nature CNN or a small CNN for stacked grayscale frames,
-each with a plain or a dueling head (Wang et al. 2016: Q = V + A - mean A).
+each with a plain or a dueling head (Wang et al. 2016: Q = V + A - mean A); an MLP may have one
+head per road (``heads``: the allroads observation ends with the road's one-hot, which picks it).
 
     >>> net = build_q_network((25,), 9, hidden=(64, 64))
     >>> tuple(net(torch.zeros(2, 25)).shape)
     (2, 9)
     >>> tuple(build_q_network((25,), 9, hidden=(64,), dueling=True)(torch.zeros(2, 25)).shape)
+    (2, 9)
+    >>> tuple(build_q_network((25,), 9, hidden=(64,), dueling=True, heads=4)(torch.zeros(2, 25)).shape)
     (2, 9)
 
 Why dueling here: at 10 decisions per second one action changes little of a 10-second return,
@@ -38,35 +41,59 @@ from laneshift import wire
 from laneshift.wire import tensors_digest  # noqa: F401 - re-exported: a checkpoint's identity
 
 class DuelingHead(nn.Module):
-    """Q(s, a) = V(s) + A(s, a) - mean_a A(s, a) from a feature vector."""
+    """Q(s, a) = V(s) + A(s, a) - mean_a A(s, a) from a feature vector; with ``heads`` > 1, one V and
+    one A per head, computed together ((batch, heads, actions)), the caller picking a head per row."""
 
-    def __init__(self, features: int, n_actions: int):
+    def __init__(self, features: int, n_actions: int, heads: int = 1):
         super().__init__()
-        self.value = nn.Linear(features, 1)
-        self.advantage = nn.Linear(features, n_actions)
+        self.heads, self.n_actions = heads, n_actions
+        self.value = nn.Linear(features, heads)
+        self.advantage = nn.Linear(features, heads * n_actions)
 
     def forward(self, h: torch.Tensor) -> torch.Tensor:
-        adv = self.advantage(h)
-        return self.value(h) + adv - adv.mean(dim=1, keepdim=True)
+        if self.heads == 1:
+            adv = self.advantage(h)
+            return self.value(h) + adv - adv.mean(dim=1, keepdim=True)
+        adv = self.advantage(h).view(-1, self.heads, self.n_actions)
+        return self.value(h).unsqueeze(2) + adv - adv.mean(dim=2, keepdim=True)
 
 
-def _head(features: int, n_actions: int, dueling: bool) -> nn.Module:
-    return DuelingHead(features, n_actions) if dueling else nn.Linear(features, n_actions)
+def _head(features: int, n_actions: int, dueling: bool, heads: int = 1) -> nn.Module:
+    return DuelingHead(features, n_actions, heads) if dueling else nn.Linear(features, heads * n_actions)
+
+
+def select_head(q_heads: torch.Tensor, onehot: torch.Tensor) -> torch.Tensor:
+    """Each row's Q-values from the head its one-hot names: (batch, heads, actions) -> (batch, actions).
+    A weighted sum rather than an index, so it runs as one batched op and is exact for a one-hot."""
+    return (q_heads * onehot.unsqueeze(2)).sum(dim=1)
 
 
 class MLPQNetwork(nn.Module):
-    def __init__(self, obs_dim: int, n_actions: int, hidden: tuple[int, ...] = (256, 256), dueling: bool = False):
+    """Linear + ReLU layers and a head. ``heads`` > 1: one head per value of the one-hot that ends the
+    observation (allroads: the road, so each road has its own Q head on a shared trunk); the layers'
+    state-dict names stay those of one head (``net.<i>.weight``, a dueling head's ``value`` and
+    ``advantage``), only the head's rows multiply."""
+
+    def __init__(self, obs_dim: int, n_actions: int, hidden: tuple[int, ...] = (256, 256), dueling: bool = False,
+                 heads: int = 1):
         super().__init__()
+        if not 1 <= heads < obs_dim:
+            raise ValueError(f"heads must be in [1, {obs_dim}) (a one-hot ends the observation), got {heads}")
         layers: list[nn.Module] = []
         size = obs_dim
         for h in hidden:
             layers += [nn.Linear(size, h), nn.ReLU()]
             size = h
-        layers.append(_head(size, n_actions, dueling))
+        layers.append(_head(size, n_actions, dueling, heads))
         self.net = nn.Sequential(*layers)
+        self.heads, self.n_actions = heads, n_actions
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        return self.net(obs.float())
+        x = obs.float()
+        if self.heads == 1:
+            return self.net(x)
+        q = self.net(x).view(-1, self.heads, self.n_actions)
+        return select_head(q, x[:, -self.heads:])
 
 
 class _FrameQNetwork(nn.Module):
@@ -124,11 +151,15 @@ CONV_DTYPES: dict[str, torch.dtype | None] = {"fp32": None, "bf16": torch.bfloat
 
 
 def build_q_network(obs_shape: tuple[int, ...], n_actions: int, hidden: tuple[int, ...] = (256, 256),
-                    dueling: bool = False, cnn: str = "nature", conv_precision: str = "fp32") -> nn.Module:
+                    dueling: bool = False, cnn: str = "nature", conv_precision: str = "fp32",
+                    heads: int = 1) -> nn.Module:
     """MLP for 1-D observations; for (stack, H, W) images the Nature CNN or the small CNN (``cnn``),
-    its convolutions computed in ``conv_precision`` (fp32 or bf16; an MLP is always fp32)."""
+    its convolutions computed in ``conv_precision`` (fp32 or bf16; an MLP is always fp32). ``heads``
+    > 1 (an MLP only): one Q head per value of the one-hot that ends the observation."""
     if len(obs_shape) == 1:
-        return MLPQNetwork(obs_shape[0], n_actions, hidden, dueling)
+        return MLPQNetwork(obs_shape[0], n_actions, hidden, dueling, heads)
+    if heads != 1:
+        raise ValueError(f"heads: one Q head per road needs a vector observation (its one-hot), got {obs_shape}")
     if len(obs_shape) == 3:
         if cnn not in CNNS:
             raise ValueError(f"no CNN {cnn!r} (one of {', '.join(CNNS)})")

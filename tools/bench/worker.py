@@ -67,7 +67,7 @@ def bench_worker(scenario: str, envs: int, steps: int, epsilon: float = 0.1) -> 
     worker = builder.env_worker(0)
     spec = builder.spec.schema
     net = build_q_network(spec.obs_shape, spec.n_actions, cfg.learner.hidden, cfg.learner.dueling,
-                          cfg.learner.cnn)
+                          cfg.learner.cnn, heads=cfg.learner.heads)
     links = CountingLinks(weights_of(net, 0, 0, 0))
     started, cpu = time.perf_counter(), time.process_time()
     summary = worker.run(links, steps)

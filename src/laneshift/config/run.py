@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from typing import Any, Literal, Mapping
 
 from .checks import NAME, ConfigError, _check, _check_choices
-from .sections import ActorConfig, EnvConfig, LearnerConfig, ReplayConfig
+from .sections import ROADS, ActorConfig, EnvConfig, LearnerConfig, ReplayConfig
 
 
 @dataclass(frozen=True)
@@ -182,6 +182,10 @@ class RunConfig:
             raise ConfigError(f"replay.spi_tolerance: must be >= the rows of one sample request "
                               f"(learner.batch_size x max(prefetch, updates_per_round) = {rows}), or sampling and "
                               f"inserting could block each other forever, got {self.replay.spi_tolerance!r}")
+        if self.learner.heads != 1 and not (self.env.is_allroads and self.learner.heads == len(ROADS)):
+            raise ConfigError(f"learner.heads: one head per road takes env.scenario=allroads and "
+                              f"{len(ROADS)} heads (one per road, picked by the observation's road one-hot), "
+                              f"got {self.learner.heads!r} on scenario {self.env.scenario!r}")
         if self.train.parallel == "sync" and self.learner.n_step > self.actor.send_every:
             # A sync round needs a batch from every worker; its first n - 1 steps complete no item.
             raise ConfigError(f"learner.n_step: must be <= actor.send_every ({self.actor.send_every}) in sync mode, "

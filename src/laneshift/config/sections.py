@@ -16,6 +16,10 @@ from typing import Any, Literal
 
 from .checks import ConfigError, _check, _check_choices
 
+#: The roads of env.scenario=allroads, in the order of its observation's one-hot (``laneshift.envspec``
+#: hands this tuple to the env as ``ALLROADS``).
+ROADS: tuple[str, ...] = ("straight", "merge", "curve", "roundabout")
+
 SCENARIO_NAMES = ("straight", "merge", "curve", "roundabout", "allroads", "lka")
 #: The safety shield's default figures: the scripted driver's bumper gap [m] and planning deceleration
 #: [m/s^2], as the env's GapShield has them (actors/envs/shield.py; tests/test_shield.py holds them equal).
@@ -61,7 +65,7 @@ class EnvConfig:
         _check(1 <= self.reward_preset <= 5, "env.reward_preset", "must be 1..5 (Table 1)", self.reward_preset)
         _check(self.max_steps >= 0, "env.max_steps", "must be >= 0", self.max_steps)
         _check(self.policy_vehicles >= 0, "env.policy_vehicles", "must be >= 0", self.policy_vehicles)
-        _check(self.road in ("", "straight", "merge", "curve", "roundabout"), "env.road",
+        _check(self.road in ("", *ROADS), "env.road",
                "must be empty (each episode draws its road) or straight, merge, curve or roundabout", self.road)
         _check(not self.road or self.is_allroads, "env.road", "pins the road of env.scenario=allroads only "
                f"(env.scenario is {self.scenario!r})", self.road)
@@ -316,6 +320,9 @@ class LearnerConfig:
     # Supervised imitation on demo rows: cross-entropy of softmax(Q(s, .)) against the demo action. 0 = off.
     bc_loss_weight: float = 0.0
     dueling: bool = False  # dueling head (Wang et al. 2016): Q = V + A - mean A
+    # One Q head per road on a shared trunk (env.scenario=allroads only: 4, one per road, picked by the
+    # road's one-hot that ends its observation). 1 = one head for every road.
+    heads: int = 1
     publish_every: int = 50  # updates between weight broadcasts (async)
     updates_per_round: int = 8  # sync: updates per round of worker batches
     phase1_updates: int = 2_000  # rehearsal: demo-only updates before phase 2
@@ -354,6 +361,8 @@ class LearnerConfig:
         for name in ("target_update_period", "publish_every", "updates_per_round", "phase1_updates",
                      "checkpoint_every", "prefetch", "torch_threads"):
             _check(getattr(self, name) >= 1, f"learner.{name}", "must be >= 1", getattr(self, name))
+        _check(not isinstance(self.heads, bool) and isinstance(self.heads, int) and self.heads >= 1, "learner.heads",
+               "must be an int >= 1", self.heads)
         _check(self.prefetch <= 64, "learner.prefetch", "must be <= 64", self.prefetch)
         _check(1 <= self.augment_pad <= 32, "learner.augment_pad", "must be 1..32", self.augment_pad)
         _check(self.huber_delta > 0, "learner.huber_delta", "must be > 0", self.huber_delta)
