@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import TextIO
 
 from laneshift.config import RunConfig
+from laneshift.checkpoints import run_checkpoint
 
 
 @dataclass(frozen=True)
@@ -76,7 +77,7 @@ def summarise(run: RunEnd, why: str, wall: float, out: TextIO) -> dict:
         f"last 100 eps    return {_fmt(last.get('return_mean'))}, length {_fmt(last.get('length_mean'))}, "
         f"crash rate {_fmt(last.get('crash_rate'))}",
     ]
-    final = run_dir / "checkpoints" / "final.safetensors"
+    final = run_checkpoint(run_dir)
     result: dict = {"workers": summaries, "learner": last, "wall_s": round(wall, 1), "env_steps": steps,
                     "episodes": episodes, "eval": None, "ended_by": why, "placement": placement,
                     "restarts": dict(run.restarts), "waits": waits, "write_failures": failures,

@@ -11,8 +11,8 @@
 A write that fails (a full disk, a read-only run dir) is counted and said, never fatal: training
 goes on and the next checkpoint retries.
 
-Room: learner (component). May import: torch, the contract (``laneshift.qnet``); never another
-component.
+Room: learner (component). May import: torch, the contract (``laneshift.qnet``, ``laneshift.checkpoints``);
+never another component.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ from typing import Any
 
 import torch
 
+from laneshift.checkpoints import checkpoints_dir
 from laneshift.qnet import save_checkpoint
 
 
@@ -29,7 +30,7 @@ class StateFiles:
     """The learner's files under ``<run dir>/checkpoints``; ``failures`` counts the writes that failed."""
 
     def __init__(self, run_dir: str | Path):
-        self.dir = Path(run_dir) / "checkpoints"
+        self.dir = checkpoints_dir(run_dir)
         self.failures = 0
 
     @property

@@ -24,12 +24,13 @@ from laneshift.tools.argtypes import comma_list, non_negative_int, positive_int
 from laneshift.config import ConfigError, EnvConfig, load_run_config
 from laneshift.tools.studies.evaluate import INITIAL_LANES, evaluate_lanes, load_checkpoint_policy
 from laneshift.progress import progress
+from laneshift.checkpoints import checkpoints_dir, run_checkpoint
 
 
 def kept_checkpoints(run_dir: str | Path) -> list[Path]:
     """The run's periodic checkpoints, oldest first (then final.safetensors, if present)."""
-    ckpts = sorted((Path(run_dir) / "checkpoints").glob("u*.safetensors"))
-    final = Path(run_dir) / "checkpoints" / "final.safetensors"
+    ckpts = sorted(checkpoints_dir(run_dir).glob("u*.safetensors"))
+    final = run_checkpoint(run_dir)
     return ckpts + ([final] if final.exists() else [])
 
 

@@ -45,6 +45,7 @@ from laneshift.tools.studies.evaluate import evaluate_lanes, load_greedy_policy
 from laneshift.tools.studies.plots import plot_curves, plot_table2
 from laneshift.tools.studies.runs import EPISODES_FILE, collect_episodes, method_config, train_logged, write_episodes
 from laneshift.tools.studies.table2 import HUMAN_LIKE_ROW, human_like_lanes, lane_stats, pooled, render_table
+from laneshift.checkpoints import run_checkpoint
 
 
 def run_compare(args: argparse.Namespace) -> dict:
@@ -70,7 +71,7 @@ def run_compare(args: argparse.Namespace) -> dict:
             cfg = configs[(method, seed)]
             started = time.monotonic()
             train_logged(cfg, out_dir / f"{method}-s{seed}.log", label=f"train {method} seed {seed}")
-            greedy = load_greedy_policy(run_dir / "checkpoints" / "final.safetensors")
+            greedy = load_greedy_policy(run_checkpoint(run_dir))
             evals = evaluate_lanes(lambda env: greedy, dataclasses.replace(cfg.env, max_steps=args.eval_max_steps),
                                    args.eval_episodes, eval_seed, progress=f"eval {method} seed {seed}")
             runs.append({"seed": seed, "run_dir": str(run_dir), "wall_s": round(time.monotonic() - started, 1),

@@ -43,6 +43,7 @@ from laneshift.tools.studies.protocol_results import TEST_SEED
 from laneshift.tools.studies.provenance import command_line, git_revision, write_json
 from laneshift.tools.studies.runs import method_config
 from laneshift.tools.studies.stats import bootstrap_ci
+from laneshift.checkpoints import run_checkpoint
 
 ROAD = "lka"
 EXPERT_ROW = "LQR expert"
@@ -91,7 +92,7 @@ def run_seed(cfg: RunConfig, state: str, args: argparse.Namespace, out_dir: Path
     run_dir = Path(cfg.train.run_dir)
     started = time.monotonic()
     train_seed(cfg, state, out_dir, method)
-    greedy = load_greedy_policy(run_dir / "checkpoints" / "final.safetensors")
+    greedy = load_greedy_policy(run_checkpoint(run_dir))
     tested = test_drive(lambda env: greedy, cfg.env, args.test_episodes, f"test {method} seed {seed}",
                         out_dir / f"{method}-s{seed}.lka_response.png")
     try:

@@ -63,6 +63,7 @@ from laneshift.tools.studies.protocol_results import (TEST_SEED, drivers_on, fin
 from laneshift.tools.studies.protocol_validation import VALIDATION_SEED, plot_validation, validation_curve
 from laneshift.tools.studies.provenance import command_line, git_revision, write_json
 from laneshift.tools.studies.runs import method_config, train_logged
+from laneshift.checkpoints import run_checkpoint
 
 SCENARIOS = ("straight", "merge", "curve", "roundabout")
 #: ``--scenario``'s choices: a road, or one network for all four.
@@ -83,7 +84,7 @@ def held_out(args: argparse.Namespace, env: EnvConfig) -> dict:
 
 def final_network(run_dir: Path | str) -> Path:
     """Where a run leaves its final network (the learner's ``final`` checkpoint)."""
-    return Path(run_dir) / "checkpoints" / "final.safetensors"
+    return run_checkpoint(run_dir)
 
 
 def seed_state(run_dir: Path, record: Path) -> str:

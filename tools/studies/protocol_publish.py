@@ -20,6 +20,7 @@ from laneshift.config import EnvConfig
 from laneshift.progress import write
 from laneshift.tools.studies.protocol_results import TEST_SEED
 from laneshift.tools.studies.provenance import command_line, git_revision, write_json
+from laneshift.checkpoints import run_checkpoint
 
 
 def eval_command(checkpoint: str | Path, env: dict, episodes: int, max_steps: int, lane: str) -> str:
@@ -56,7 +57,7 @@ def publish_final(run: dict, dest: Path, road: str, method: str, label: str,
     config) around ``tested(checkpoint)``, the protocol's own test table. The files written; none
     if the run's final network is gone (said on a line starting with ``label``)."""
     seed = run["seed"]
-    final = Path(run["run_dir"]) / "checkpoints" / "final.safetensors"
+    final = run_checkpoint(run["run_dir"])
     if not final.is_file():
         write(f"{label}: publish: seed {seed}: {final} is gone; not published")
         return []

@@ -28,6 +28,7 @@ import numpy as np
 from laneshift.tools.argtypes import add_set_arg, comma_list, non_negative_int, parse_set, positive_int
 from laneshift.config import ConfigError, load_run_config
 from laneshift.progress import progress, write
+from laneshift.checkpoints import run_checkpoint
 
 
 def preset_overrides(preset: int) -> dict[str, Any]:
@@ -75,7 +76,7 @@ def run_presets(args: argparse.Namespace) -> dict:
             train_logged(cfg, out_dir / f"{name}.log", label=f"train {name}")
             _, returns, lengths = episode_curves(str(run_dir))
             returns_by_run[name] = returns
-            ev = evaluate_checkpoint(run_dir / "checkpoints" / "final.safetensors", cfg.env,
+            ev = evaluate_checkpoint(run_checkpoint(run_dir), cfg.env,
                                      episodes=args.eval_episodes, seed=100_000, progress=f"eval {name}")
             tail = returns[-100:] if len(returns) else np.zeros(1)
             results["runs"][name] = {
