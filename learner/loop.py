@@ -79,8 +79,8 @@ class Learner:
         t = cfg.train
         # ``evaluate`` plays the env on the validation episodes (train.validation_seed; bound by the builder).
         self.evaluator = GreedyEval(evaluate, t.eval_interval, spec.schema.obs_shape, spec.schema.n_actions,
-                                    cfg.learner.hidden, cfg.learner.dueling,
-                                    cfg.learner.cnn, cfg.learner.heads) if t.eval_interval and evaluate is not None else None
+                                    cfg.learner.hidden, cfg.learner.dueling, cfg.learner.cnn,
+                                    cfg.learner.heads) if t.eval_interval and evaluate is not None else None
         self.last_eval: dict | None = None
         self.last_update: Mapping[str, float] = {}  # the last update's metrics (dqn.UpdateMetrics: read lazily)
         self.replay_stats: dict = {}
