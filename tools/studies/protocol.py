@@ -82,11 +82,6 @@ def held_out(args: argparse.Namespace, env: EnvConfig) -> dict:
     return {**test, "roads": list(allroads.ALLROADS)} if env.is_allroads else test
 
 
-def final_network(run_dir: Path | str) -> Path:
-    """Where a run leaves its final network (the learner's ``final`` checkpoint)."""
-    return run_checkpoint(run_dir)
-
-
 def seed_state(run_dir: Path, record: Path) -> str:
     """``done`` (its json exists), ``trained`` (the run finished, not evaluated yet), ``resume``
     (a run stopped unfinished) or ``new``."""
@@ -98,7 +93,7 @@ def seed_state(run_dir: Path, record: Path) -> str:
         ended = json.loads((run_dir / "summary.json").read_text()).get("ended_by")
     except (OSError, ValueError, AttributeError):
         ended = None
-    return "trained" if ended == "done" and final_network(run_dir).is_file() else "resume"
+    return "trained" if ended == "done" and run_checkpoint(run_dir).is_file() else "resume"
 
 
 def check_same_protocol(seed: int, record: Path, test: dict, env_steps: int) -> None:
@@ -193,7 +188,7 @@ def run_seed(cfg: RunConfig, state: str, args: argparse.Namespace, out_dir: Path
     run_dir = Path(cfg.train.run_dir)
     started = time.monotonic()
     train_seed(cfg, state, out_dir, method)
-    greedy = load_greedy_policy(final_network(run_dir))
+    greedy = load_greedy_policy(run_checkpoint(run_dir))
     test_env = dataclasses.replace(cfg.env, max_steps=args.eval_max_steps)
     final_validation = validate_final(greedy, test_env, args.final_validation_episodes,
                                       f"validate {method} seed {seed}")
@@ -247,7 +242,7 @@ def add_final_validation(record_path: Path, cfg: RunConfig, args: argparse.Names
     episodes = args.final_validation_episodes
     if not episodes or (record.get("final_validation") or {}).get("episodes_per_lane") == episodes:
         return record
-    final = final_network(cfg.train.run_dir)
+    final = run_checkpoint(cfg.train.run_dir)
     if not final.is_file():
         raise ConfigError(f"seed {cfg.train.seed}: --final-validation-episodes needs the run's final network, and "
                           f"{final} is not there")
