@@ -21,8 +21,8 @@ replay server's count, the workers' episode reports and the count restored with 
 so TensorBoard's step never goes back, on a restart or ``--resume`` either.
 
 What the loops use, each a module of its own: ``state`` (the files a restart goes on from),
-``episodes`` (the workers' episode records), ``status`` (the status of each log interval and its
-TensorBoard tags), ``periodic_eval`` (the greedy evaluation during training), ``batches`` (the
+``cpus`` (phase 1 on every CPU), ``episodes`` (the workers' episode records), ``status`` (the
+status of each log interval and its TensorBoard tags), ``periodic_eval`` (the greedy evaluation during training), ``batches`` (the
 back-off after a refusal, a batch cut into updates), ``prefetch`` (the async mode's next sample in
 flight); ``process`` runs it as a process (``laneshift learner --config run.yaml``).
 
@@ -44,6 +44,7 @@ from laneshift.envspec import RECORDED_ENV_OPTIONS, EnvSpec
 from laneshift.qnet import weights_of
 
 from .batches import MAX_REPLY_BYTES, batches_per_request, retry_delay, sample_or_wait, split_updates
+from .cpus import phase1_cpus
 from .dqn import METRIC_NAMES, DoubleDQN
 from .episodes import EpisodeStats
 from .metrics import MetricsLog
@@ -262,12 +263,15 @@ class Learner:
         print(f"learner: {self.cfg.replay.demo_mode} phase 1: {self.lcfg.phase1_updates} updates on demos only",
               flush=True)
         next_log = time.monotonic()
-        while self.agent.updates < self.lcfg.phase1_updates and not self._should_stop():
-            n = min(self.per_request, self.lcfg.phase1_updates - self.agent.updates)
-            batch = sample_or_wait(self.links.sample, wire.SampleRequest(self.lcfg.batch_size, n), self.stop.wait)
-            if batch is not None:
-                self._updates(batch)
-            next_log = self._log_when_due(next_log)
+        with phase1_cpus(self.lcfg.phase1_threads, self.agent.device) as widened:
+            if widened:
+                print(f"learner: {widened}", flush=True)
+            while self.agent.updates < self.lcfg.phase1_updates and not self._should_stop():
+                n = min(self.per_request, self.lcfg.phase1_updates - self.agent.updates)
+                batch = sample_or_wait(self.links.sample, wire.SampleRequest(self.lcfg.batch_size, n), self.stop.wait)
+                if batch is not None:
+                    self._updates(batch)
+                next_log = self._log_when_due(next_log)
         if self.stop.is_set():
             return
         self.checkpoint("phase1")

@@ -72,7 +72,8 @@ def run_learner(cfg: RunConfig, spec: EnvSpec, evaluate: EvaluatePolicy | None =
     # only launches kernels. Measured on a 2-core machine with the whole system running, two threads
     # made the run slower (0.71x and 0.95x env steps/s against one thread; `laneshift bench run
     # --train-args "--workers 2 --set learner.torch_threads=2"` measures a run's env steps/s); raise
-    # it on a node whose cores the learner has to itself.
+    # it on a node whose cores the learner has to itself. Phase 1 (pre-training, actors idle) is the
+    # exception: there the learner takes every CPU (learner.phase1_threads, learner/cpus.py).
     torch.set_num_threads(cfg.learner.torch_threads)
     tune_learner_process()
     stop = threading.Event()

@@ -29,6 +29,7 @@ def test_bench_learner_json_shape(capsys) -> None:
     assert {c["name"]: c["cnn_precision"] for c in out["cases"]}["small-b32-bf16"] == "bf16"
     nets = {c["name"]: (c["network"], c["obs_shape"], c["obs_dtype"], c["batch"]) for c in out["cases"]}
     assert nets == {"mlp-b256": ("MLPQNetwork", [82], "float32", 256),
+                    "mlp512-b256": ("MLPQNetwork", [96], "float32", 256),
                     "cnn-b32": ("NatureCNN", [4, 100, 100], "uint8", 32),
                     "cnn-b64": ("NatureCNN", [4, 100, 100], "uint8", 64),
                     "small-b32": ("SmallCNN", [4, 100, 100], "uint8", 32),
@@ -36,6 +37,8 @@ def test_bench_learner_json_shape(capsys) -> None:
                     "small-b32-bf16": ("SmallCNN", [4, 100, 100], "uint8", 32),
                     "small-b128": ("SmallCNN", [4, 100, 100], "uint8", 128),
                     "small-b128-bf16": ("SmallCNN", [4, 100, 100], "uint8", 128)}
+    hidden = {c["name"]: c["hidden"] for c in out["cases"]}
+    assert hidden["mlp-b256"] == [256, 256] and hidden["mlp512-b256"] == [512, 512]
     for case in out["cases"]:
         assert case["params"] > 0 and case["n_actions"] == 9
         for impl in ("learner", "bare"):

@@ -131,6 +131,9 @@ def test_rehearsal_phase1_stores_nothing_and_phase2_starts_from_it(tmp_path, lka
     assert first_on_v1
     for w in first_on_v1:
         assert w["first_weights_sha256"] == tensors_digest(phase1)
+    # Phase 1 ran on every CPU while the actors waited (learner.phase1_threads, learner/cpus.py).
+    if hasattr(os, "sched_getaffinity") and len(os.sched_getaffinity(0)) >= 2:
+        assert "learner: phase 1 on CPUs" in (run_dir / "logs" / "learner.log").read_text()
 
 
 def test_sync_mode_never_acts_on_stale_weights(tmp_path):

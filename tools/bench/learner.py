@@ -19,7 +19,8 @@ Each measurement also records the process's CPU time (``updates_per_cpu_s``): wi
 thread on a CPU shared with other work it is steadier than wall time, and the table shows both
 ratios.
 
-Cases: the vector default (MLP, obs (82,) float32, hidden (256, 256), 9 actions, batch 256) and
+Cases: the vector default (MLP, obs (82,) float32, hidden (256, 256), 9 actions, batch 256), the
+allroads network's 512 x 512 trunk (obs (96,)), and
 the Nature CNN that grayscale observations (4 x 100 x 100 uint8) select, at batch 32 and 64.
 Hyperparameters are ``LearnerConfig``'s defaults; ``torch.set_num_threads`` is the learner's
 ``learner.torch_threads`` (1) unless ``--threads`` says otherwise. On cuda each measurement is
@@ -63,10 +64,12 @@ class Case:
     batch: int
     cnn: str = "nature"  # learner.cnn, for image observations
     precision: str = "fp32"  # learner.cnn_precision
+    hidden: tuple[int, ...] | None = None  # learner.hidden (None: the default)
 
 
 CASES = (
     Case("mlp-b256", (82,), "float32", 256),  # env.observation=vector, the default
+    Case("mlp512-b256", (96,), "float32", 256, hidden=(512, 512)),  # the allroads network's trunk
     Case("cnn-b32", (4, 100, 100), "uint8", 32),  # env.observation=grayscale (the paper's)
     Case("cnn-b64", (4, 100, 100), "uint8", 64),
     Case("small-b32", (4, 100, 100), "uint8", 32, "small"),  # learner.cnn=small: the pixel runs' network
@@ -162,7 +165,7 @@ def learner_step(case: Case, cfg: LearnerConfig) -> tuple[Callable[[], None], to
     """One ``DoubleDQN.update`` per call, cycling over the parts of one decoded SampledBatch."""
     from laneshift.learner.dqn import DoubleDQN
 
-    agent = DoubleDQN(case.obs_shape, N_ACTIONS, dataclasses.replace(cfg, cnn=case.cnn, cnn_precision=case.precision))
+    agent = DoubleDQN(case.obs_shape, N_ACTIONS, _case_config(case, cfg))
     parts = _split(sampled_batch(case, cfg.prefetch))
     state = {"i": 0}
 
@@ -173,11 +176,17 @@ def learner_step(case: Case, cfg: LearnerConfig) -> tuple[Callable[[], None], to
     return step, agent.online, agent.device
 
 
+def _case_config(case: Case, cfg: LearnerConfig) -> LearnerConfig:
+    return dataclasses.replace(cfg, cnn=case.cnn, cnn_precision=case.precision, hidden=case.hidden or cfg.hidden)
+
+
 def bare_step(case: Case, cfg: LearnerConfig, device: torch.device) -> Callable[[], None]:
     """The same update in plain torch, batches resident on the device, nothing read back."""
     import torch
     import torch.nn.functional as F
     from laneshift.qnet import build_q_network
+
+    cfg = _case_config(case, cfg)
 
     torch.manual_seed(cfg.seed)
     online = build_q_network(case.obs_shape, N_ACTIONS, cfg.hidden, cfg.dueling, case.cnn, case.precision).to(device)
@@ -280,6 +289,7 @@ def bench(device: str = "auto", *, seconds: float = 3.0, rounds: int = 2, warmup
                 "name": case.name, "network": type(online).__name__, "cnn_precision": case.precision,
                 "obs_shape": list(case.obs_shape),
                 "obs_dtype": case.obs_dtype, "batch": case.batch, "n_actions": N_ACTIONS,
+                "hidden": list(case.hidden or cfg.hidden),
                 "params": sum(p.numel() for p in online.parameters())}
             for name, runs in per_round.items():
                 rates = [r["updates_per_s"] for r in runs]

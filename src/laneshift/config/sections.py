@@ -341,6 +341,10 @@ class LearnerConfig:
     # 30 MB (pixel rows at batch 128: 3), the size above which glibc maps every buffer anew.
     prefetch: int = 4
     torch_threads: int = 1  # torch threads for the learner's updates
+    # Phase 1 (dqfd and rehearsal pre-training on the demo shard) runs while every actor waits: the
+    # CPU learner then lifts its pin (deploy.learner_core) and uses this many torch threads, 0 = one
+    # per CPU it may use; 1 = as in phase 2 (learner/cpus.py).
+    phase1_threads: int = 0
     # The learner's Prometheus /metrics: -1 off, 0 a free port (local runs turn it on), else that port.
     metrics_port: int = -1
     metrics_host: str = "127.0.0.1"  # bind elsewhere only on purpose: no authentication
@@ -363,6 +367,9 @@ class LearnerConfig:
             _check(getattr(self, name) >= 1, f"learner.{name}", "must be >= 1", getattr(self, name))
         _check(not isinstance(self.heads, bool) and isinstance(self.heads, int) and self.heads >= 1, "learner.heads",
                "must be an int >= 1", self.heads)
+        _check(not isinstance(self.phase1_threads, bool) and isinstance(self.phase1_threads, int)
+               and self.phase1_threads >= 0, "learner.phase1_threads", "must be an int >= 0 (0 = one per CPU)",
+               self.phase1_threads)
         _check(self.prefetch <= 64, "learner.prefetch", "must be <= 64", self.prefetch)
         _check(1 <= self.augment_pad <= 32, "learner.augment_pad", "must be 1..32", self.augment_pad)
         _check(self.huber_delta > 0, "learner.huber_delta", "must be > 0", self.huber_delta)

@@ -1,0 +1,90 @@
+"""``learner.cpus.phase1_cpus``: phase 1 lifts the learner's pin and widens torch's threads, then puts
+back every thread's own mask and the thread count; a GPU learner and ``learner.phase1_threads=1``
+change nothing. Real affinity calls on this process, restored by each test.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, torch and the standard library."""
+
+from __future__ import annotations
+
+import os
+import threading
+
+import pytest
+import torch
+
+from laneshift.config import ConfigError, LearnerConfig
+from laneshift.learner.cpus import node_cpus, phase1_cpus
+
+pytestmark = pytest.mark.skipif(not hasattr(os, "sched_getaffinity") or len(node_cpus() & os.sched_getaffinity(0)) < 2,
+                                reason="needs CPU affinity and two CPUs")
+
+
+@pytest.fixture()
+def pinned_to_one_cpu():
+    """This process on one CPU with one torch thread, as a pinned learner is; restored afterwards."""
+    mask, threads = os.sched_getaffinity(0), torch.get_num_threads()
+    tids = [int(t) for t in os.listdir("/proc/self/task")]
+    masks = {t: os.sched_getaffinity(t) for t in tids}
+    first = min(mask)
+    for t in tids:
+        os.sched_setaffinity(t, {first})
+    torch.set_num_threads(1)
+    yield first
+    torch.set_num_threads(threads)
+    for t in [int(t) for t in os.listdir("/proc/self/task")]:
+        try:
+            os.sched_setaffinity(t, masks.get(t, mask))
+        except OSError:
+            pass
+
+
+def test_phase1_uses_every_cpu_then_goes_back(pinned_to_one_cpu):
+    wide = node_cpus()
+    with phase1_cpus(0, torch.device("cpu")) as line:
+        assert os.sched_getaffinity(0) == wide & os.sched_getaffinity(0) and len(os.sched_getaffinity(0)) >= 2
+        assert torch.get_num_threads() == len(os.sched_getaffinity(0))
+        assert line is not None and "phase 1 on CPUs" in line and "learner.phase1_threads" in line
+        torch.ones(512, 512) @ torch.ones(512, 512)  # start torch's threads inside the block
+    assert os.sched_getaffinity(0) == {pinned_to_one_cpu}
+    assert torch.get_num_threads() == 1
+
+
+def test_an_explicit_thread_count_is_kept(pinned_to_one_cpu):
+    with phase1_cpus(2, torch.device("cpu")) as line:
+        assert torch.get_num_threads() == 2 and line is not None
+    assert torch.get_num_threads() == 1 and os.sched_getaffinity(0) == {pinned_to_one_cpu}
+
+
+def test_other_threads_get_their_own_masks_back(pinned_to_one_cpu):
+    """In-process mode the workers are threads of the learner's process: each keeps its own mask."""
+    other = max(os.sched_getaffinity(0) | node_cpus())
+    ready, done, seen = threading.Event(), threading.Event(), {}
+
+    def worker():
+        os.sched_setaffinity(0, {other})
+        ready.set()
+        done.wait(5)
+        seen["after"] = os.sched_getaffinity(0)
+
+    t = threading.Thread(target=worker)
+    t.start()
+    assert ready.wait(5)
+    with phase1_cpus(0, torch.device("cpu")):
+        pass
+    done.set()
+    t.join(5)
+    assert seen["after"] == {other}
+
+
+@pytest.mark.parametrize("threads, device", [(1, "cpu"), (0, "cuda")])
+def test_nothing_changes_for_one_thread_or_a_gpu(pinned_to_one_cpu, threads, device):
+    with phase1_cpus(threads, torch.device(device)) as line:
+        assert line is None
+        assert os.sched_getaffinity(0) == {pinned_to_one_cpu} and torch.get_num_threads() == 1
+    assert os.sched_getaffinity(0) == {pinned_to_one_cpu}
+
+
+@pytest.mark.parametrize("bad", [-1, True, 1.5])
+def test_config_refuses_a_bad_thread_count(bad):
+    with pytest.raises(ConfigError, match="learner.phase1_threads"):
+        LearnerConfig(phase1_threads=bad)

@@ -1,0 +1,71 @@
+"""Phase 1's update rate with the learner pinned to one CPU against phase 1 on every CPU
+(``learner.phase1_threads`` 1 against 0): whole ``laneshift train`` runs in local mode, alternating
+A B A B, each network width its own pair. The rate is read from the run's ``metrics.jsonl``: the
+updates between the first and the last phase-1 record over the time between them.
+
+    python tools/bench/scripts/phase1_threads.py --rounds 2 --hidden 256,256 512,512
+
+Needs a quiet machine (a training run beside it measures the other run). The demo shard is made
+by the first (untimed) run and reused.
+
+Room: the tools (benchmark scripts). May import: the standard library; runs ``laneshift`` as a
+command.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+
+def phase1_rate(metrics: Path) -> float:
+    """Updates per second over the phase-1 records of a run's metrics.jsonl."""
+    recs = [r for r in map(json.loads, metrics.read_text().splitlines())
+            if r.get("kind") == "learner" and r.get("phase") == 1]
+    if len(recs) < 2 or recs[-1]["time"] <= recs[0]["time"]:
+        raise SystemExit(f"phase1_threads: fewer than two phase-1 records in {metrics}")
+    return (recs[-1]["updates"] - recs[0]["updates"]) / (recs[-1]["time"] - recs[0]["time"])
+
+
+def train(run_dir: Path, args: argparse.Namespace, hidden: str, threads: int) -> float:
+    cmd = [args.laneshift, "train", "--scenario", args.scenario, "--method", args.method,
+           "--env-steps", str(args.env_steps), "--run-dir", str(run_dir), "--overwrite",
+           "--set", f"learner.phase1_updates={args.updates}", "--set", f"learner.hidden={hidden}",
+           "--set", f"learner.phase1_threads={threads}", "--set", "train.eval_episodes=0"]
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    return phase1_rate(run_dir / "metrics.jsonl")
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--rounds", type=int, default=2)
+    p.add_argument("--hidden", nargs="+", default=["256,256", "512,512"], help="learner.hidden values")
+    p.add_argument("--updates", type=int, default=5000, help="learner.phase1_updates per run")
+    p.add_argument("--env-steps", type=int, default=2000)
+    p.add_argument("--scenario", default="merge")
+    p.add_argument("--method", default="dqfd-bc-alongside-gaps-safe-shield")
+    p.add_argument("--laneshift", default=str(Path(sys.executable).with_name("laneshift")))
+    args = p.parse_args(argv)
+    with tempfile.TemporaryDirectory(prefix="phase1-threads-") as tmp:
+        train(Path(tmp) / "warmup", args, args.hidden[0], 1)  # makes the demo shard; not timed
+        rates: dict[tuple[str, int], list[float]] = {}
+        for r in range(args.rounds):
+            for hidden in args.hidden:
+                for threads in (1, 0):  # A B: drift hits both alike
+                    rate = train(Path(tmp) / f"r{r}-{hidden}-{threads}", args, hidden, threads)
+                    rates.setdefault((hidden, threads), []).append(rate)
+                    print(f"round {r} hidden {hidden} phase1_threads {threads}: {rate:.1f} updates/s", flush=True)
+    for hidden in args.hidden:
+        one, every = statistics.fmean(rates[hidden, 1]), statistics.fmean(rates[hidden, 0])
+        print(f"hidden {hidden}: phase 1 at {one:.1f} updates/s pinned (1 thread), {every:.1f} on every CPU: "
+              f"{every / one:.2f}x")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
