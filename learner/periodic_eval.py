@@ -48,7 +48,9 @@ class GreedyEval:
     def __init__(self, evaluate: EvaluatePolicy, every: int, obs_shape: tuple[int, ...],
                  n_actions: int, hidden: tuple[int, ...], dueling: bool, cnn: str = "nature", heads: int = 1):
         self.evaluate, self.every = evaluate, every
-        self._net_args = (tuple(obs_shape), n_actions, tuple(hidden), dueling, cnn, "fp32", heads)
+        # The evaluation acts in float32 whatever the learner's conv precision (acting always does).
+        self._net_kwargs = {"obs_shape": tuple(obs_shape), "n_actions": n_actions, "hidden": tuple(hidden),
+                            "dueling": dueling, "cnn": cnn, "heads": heads}
         self.next_at = every
         self.failed: str | None = None
         self._thread: threading.Thread | None = None
@@ -89,7 +91,7 @@ class GreedyEval:
     def _run(self, state: dict[str, torch.Tensor], info: dict) -> None:
         began = time.monotonic()
         try:
-            net = build_q_network(*self._net_args)
+            net = build_q_network(**self._net_kwargs)
             net.load_state_dict(state)
             net.requires_grad_(False)
             cancel = self._cancel
