@@ -16,8 +16,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TextIO
 
-from laneshift.config import RunConfig
 from laneshift.checkpoints import run_checkpoint
+from laneshift.config import RunConfig
 
 
 @dataclass(frozen=True)

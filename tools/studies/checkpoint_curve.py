@@ -20,11 +20,11 @@ import shutil
 import sys
 from pathlib import Path
 
+from laneshift.checkpoints import checkpoints_dir, run_checkpoint
 from laneshift.tools.argtypes import comma_list, non_negative_int, positive_int
 from laneshift.config import ConfigError, EnvConfig, load_run_config
 from laneshift.tools.studies.evaluate import INITIAL_LANES, evaluate_lanes, load_checkpoint_policy
 from laneshift.progress import progress
-from laneshift.checkpoints import checkpoints_dir, run_checkpoint
 
 
 def kept_checkpoints(run_dir: str | Path) -> list[Path]:

@@ -38,6 +38,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from laneshift.checkpoints import run_checkpoint
 from laneshift.config import METHODS, ConfigError, load_run_config, method_settings
 from laneshift.progress import progress, write
 from laneshift.tools.argtypes import add_set_arg, parse_set, positive_int, seed_list
@@ -45,7 +46,6 @@ from laneshift.tools.studies.evaluate import evaluate_lanes, load_greedy_policy
 from laneshift.tools.studies.plots import plot_curves, plot_table2
 from laneshift.tools.studies.runs import EPISODES_FILE, collect_episodes, method_config, train_logged, write_episodes
 from laneshift.tools.studies.table2 import HUMAN_LIKE_ROW, human_like_lanes, lane_stats, pooled, render_table
-from laneshift.checkpoints import run_checkpoint
 
 
 def run_compare(args: argparse.Namespace) -> dict:

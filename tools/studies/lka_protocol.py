@@ -33,6 +33,7 @@ from pathlib import Path
 
 import yaml
 
+from laneshift.checkpoints import run_checkpoint
 from laneshift.config import METHODS, ConfigError, EnvConfig, RunConfig, load_run_config
 from laneshift.progress import progress, write
 from laneshift.tools.argtypes import add_set_arg, parse_set, positive_int
@@ -43,7 +44,6 @@ from laneshift.tools.studies.protocol_results import TEST_SEED
 from laneshift.tools.studies.provenance import command_line, git_revision, write_json
 from laneshift.tools.studies.runs import method_config
 from laneshift.tools.studies.stats import bootstrap_ci
-from laneshift.checkpoints import run_checkpoint
 
 ROAD = "lka"
 EXPERT_ROW = "LQR expert"

@@ -52,6 +52,7 @@ from pathlib import Path
 
 import yaml
 
+from laneshift.checkpoints import run_checkpoint
 from laneshift.config import METHODS, ConfigError, EnvConfig, RunConfig, load_run_config, method_settings
 from laneshift.progress import progress, write
 from laneshift.tools.argtypes import add_set_arg, fraction, non_negative_int, parse_set, positive_int, seed_list
@@ -63,7 +64,6 @@ from laneshift.tools.studies.protocol_results import (TEST_SEED, drivers_on, fin
 from laneshift.tools.studies.protocol_validation import VALIDATION_SEED, plot_validation, validation_curve
 from laneshift.tools.studies.provenance import command_line, git_revision, write_json
 from laneshift.tools.studies.runs import method_config, train_logged
-from laneshift.checkpoints import run_checkpoint
 
 SCENARIOS = ("straight", "merge", "curve", "roundabout")
 #: ``--scenario``'s choices: a road, or one network for all four.

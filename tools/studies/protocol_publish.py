@@ -16,11 +16,11 @@ import shutil
 from pathlib import Path
 from typing import Callable
 
+from laneshift.checkpoints import run_checkpoint
 from laneshift.config import EnvConfig
 from laneshift.progress import write
 from laneshift.tools.studies.protocol_results import TEST_SEED
 from laneshift.tools.studies.provenance import command_line, git_revision, write_json
-from laneshift.checkpoints import run_checkpoint
 
 
 def eval_command(checkpoint: str | Path, env: dict, episodes: int, max_steps: int, lane: str) -> str:

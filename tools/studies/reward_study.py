@@ -25,10 +25,10 @@ from typing import Any
 
 import numpy as np
 
+from laneshift.checkpoints import run_checkpoint
 from laneshift.tools.argtypes import add_set_arg, comma_list, non_negative_int, parse_set, positive_int
 from laneshift.config import ConfigError, load_run_config
 from laneshift.progress import progress, write
-from laneshift.checkpoints import run_checkpoint
 
 
 def preset_overrides(preset: int) -> dict[str, Any]:
