@@ -266,8 +266,22 @@ class Learner:
         with phase1_cpus(self.lcfg.phase1_threads, self.agent.device) as widened:
             if widened:
                 print(f"learner: {widened}", flush=True)
+            # Whole requests with the next one in flight (prefetch.py): asked for one at a time, the
+            # round trip and the decode left the update idle (phase 1 ran at half the bench's rate).
+            ahead = Prefetcher(self.links.sample, lambda: wire.SampleRequest(self.lcfg.batch_size, self.per_request),
+                               self.stop)
+            try:
+                while (self.agent.updates + self.per_request <= self.lcfg.phase1_updates
+                       and not self._should_stop()):
+                    batch = ahead.take(timeout=0.5)
+                    if batch is not None:
+                        self._updates(batch)
+                    next_log = self._log_when_due(next_log)
+            finally:
+                self.unused_sample_rows += ahead.close()  # demo rows sampled ahead, counted at the run's end
+            # The last updates (fewer than one request's) are asked for exactly.
             while self.agent.updates < self.lcfg.phase1_updates and not self._should_stop():
-                n = min(self.per_request, self.lcfg.phase1_updates - self.agent.updates)
+                n = self.lcfg.phase1_updates - self.agent.updates
                 batch = sample_or_wait(self.links.sample, wire.SampleRequest(self.lcfg.batch_size, n), self.stop.wait)
                 if batch is not None:
                     self._updates(batch)

@@ -4,6 +4,7 @@ A B A B, each network width its own pair. The rate is read from the run's ``metr
 updates between the first and the last phase-1 record over the time between them.
 
     python tools/bench/scripts/phase1_threads.py --rounds 2 --hidden 256,256 512,512
+    python tools/bench/scripts/phase1_threads.py --threads 0 --laneshift OTHER_CHECKOUT/.venv/bin/laneshift
 
 Needs a quiet machine (a training run beside it measures the other run). The demo shard is made
 by the first (untimed) run and reused.
@@ -32,10 +33,10 @@ def phase1_rate(metrics: Path) -> float:
     return (recs[-1]["updates"] - recs[0]["updates"]) / (recs[-1]["time"] - recs[0]["time"])
 
 
-def train(run_dir: Path, args: argparse.Namespace, hidden: str, threads: int) -> float:
+def train(run_dir: Path, args: argparse.Namespace, hidden: str, threads: int, updates: int | None = None) -> float:
     cmd = [args.laneshift, "train", "--scenario", args.scenario, "--method", args.method,
            "--env-steps", str(args.env_steps), "--run-dir", str(run_dir), "--overwrite",
-           "--set", f"learner.phase1_updates={args.updates}", "--set", f"learner.hidden={hidden}",
+           "--set", f"learner.phase1_updates={updates or args.updates}", "--set", f"learner.hidden={hidden}",
            "--set", f"learner.phase1_threads={threads}", "--set", "train.eval_episodes=0"]
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     return phase1_rate(run_dir / "metrics.jsonl")
@@ -49,21 +50,26 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--env-steps", type=int, default=2000)
     p.add_argument("--scenario", default="merge")
     p.add_argument("--method", default="dqfd-bc-alongside-gaps-safe-shield")
-    p.add_argument("--laneshift", default=str(Path(sys.executable).with_name("laneshift")))
+    p.add_argument("--threads", default="1,0", help="learner.phase1_threads values, alternated (default 1,0)")
+    p.add_argument("--laneshift", default=str(Path(sys.executable).with_name("laneshift")),
+                   help="the laneshift command (another checkout's, to compare two revisions)")
     args = p.parse_args(argv)
+    settings = [int(t) for t in args.threads.split(",")]
     with tempfile.TemporaryDirectory(prefix="phase1-threads-") as tmp:
-        train(Path(tmp) / "warmup", args, args.hidden[0], 1)  # makes the demo shard; not timed
+        train(Path(tmp) / "warmup", args, args.hidden[0], settings[0], updates=200)  # the demo shard; not timed
         rates: dict[tuple[str, int], list[float]] = {}
         for r in range(args.rounds):
             for hidden in args.hidden:
-                for threads in (1, 0):  # A B: drift hits both alike
+                for threads in settings:  # A B: drift hits both alike
                     rate = train(Path(tmp) / f"r{r}-{hidden}-{threads}", args, hidden, threads)
                     rates.setdefault((hidden, threads), []).append(rate)
                     print(f"round {r} hidden {hidden} phase1_threads {threads}: {rate:.1f} updates/s", flush=True)
     for hidden in args.hidden:
-        one, every = statistics.fmean(rates[hidden, 1]), statistics.fmean(rates[hidden, 0])
-        print(f"hidden {hidden}: phase 1 at {one:.1f} updates/s pinned (1 thread), {every:.1f} on every CPU: "
-              f"{every / one:.2f}x")
+        means = {t: statistics.fmean(rates[hidden, t]) for t in settings}
+        line = ", ".join(f"phase1_threads {t}: {m:.1f} updates/s" for t, m in means.items())
+        if 1 in means and 0 in means:
+            line += f" (every CPU against pinned: {means[0] / means[1]:.2f}x)"
+        print(f"hidden {hidden}: {line}")
     return 0
 
 
