@@ -5,7 +5,9 @@ CPU the process may use for that phase, then puts both back as they were.
 
 Why it pays: on the 2-core machine a run pins the learner to one CPU and its workers to the other;
 in phase 1 the workers' CPU sat idle (``top``: 47 % idle for the 5 minutes of an ``allroads`` run's
-20,000 pre-training updates). Why only phase 1: in phase 2 the workers, the replay server and the
+20,000 pre-training updates); with it, phase 1 of a run made 1.13x the updates a second with
+256 x 256 units and 1.41x with 512 x 512 (`tools/bench/scripts/phase1_threads.py`,
+docs/performance-log.md). Why only phase 1: in phase 2 the workers, the replay server and the
 router use the other CPUs, and a second learner thread there made runs slower
 (``learner/process.py``).
 
