@@ -22,9 +22,10 @@ so TensorBoard's step never goes back, on a restart or ``--resume`` either.
 
 What the loops use, each a module of its own: ``state`` (the files a restart goes on from),
 ``cpus`` (phase 1 on every CPU), ``episodes`` (the workers' episode records), ``status`` (the
-status of each log interval and its TensorBoard tags), ``periodic_eval`` (the greedy evaluation during training), ``batches`` (the
-back-off after a refusal, a batch cut into updates), ``prefetch`` (the async mode's next sample in
-flight); ``process`` runs it as a process (``laneshift learner --config run.yaml``).
+status of each log interval and its TensorBoard tags), ``periodic_eval`` (the greedy evaluation
+during training), ``batches`` (the back-off after a refusal, a batch cut into updates),
+``prefetch`` (the next sample in flight: phase 1 and the async mode); ``process`` runs it as a
+process (``laneshift learner --config run.yaml``).
 
 Room: learner (component). May import: the contract and laneshift.learner; never another component.
 """
@@ -93,7 +94,7 @@ class Learner:
             print(f"learner: {self.per_request} batches of {cfg.learner.batch_size} per sample request, not "
                   f"learner.prefetch {cfg.learner.prefetch} (a reply stays under "
                   f"{MAX_REPLY_BYTES // 2**20} MB)", flush=True)
-        self.unused_sample_rows = 0  # rows sampled ahead that no update used (the end of a run)
+        self.unused_sample_rows = 0  # rows sampled ahead that no update used (phase 1's end, the run's end)
         self.stop_reason: dict | None = None
         self.started = time.monotonic()
         self.rates = IntervalRates()
@@ -268,8 +269,8 @@ class Learner:
                 print(f"learner: {widened}", flush=True)
             # Whole requests with the next one in flight (prefetch.py): asked for one at a time, the
             # round trip and the decode left the update idle (phase 1 ran at half the bench's rate).
-            ahead = Prefetcher(self.links.sample, lambda: wire.SampleRequest(self.lcfg.batch_size, self.per_request),
-                               self.stop)
+            request = wire.SampleRequest(self.lcfg.batch_size, self.per_request)
+            ahead = Prefetcher(self.links.sample, lambda: request, self.stop)
             try:
                 while (self.agent.updates + self.per_request <= self.lcfg.phase1_updates
                        and not self._should_stop()):
