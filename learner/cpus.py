@@ -19,6 +19,7 @@ from __future__ import annotations
 import os
 from collections.abc import Iterator
 from contextlib import contextmanager
+from pathlib import Path
 
 import torch
 
@@ -57,7 +58,7 @@ def node_cpus() -> set[int]:
     cgroup's cpuset (read from /sys where cgroup v2 says; otherwise all of ``os.cpu_count()``, which
     ``sched_setaffinity`` narrows to the allowed ones)."""
     try:
-        text = open("/sys/fs/cgroup/cpuset.cpus.effective").read().strip()
+        text = Path("/sys/fs/cgroup/cpuset.cpus.effective").read_text().strip()
         cpus: set[int] = set()
         for part in text.split(","):
             lo, _, hi = part.partition("-")

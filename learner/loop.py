@@ -267,8 +267,8 @@ class Learner:
         with phase1_cpus(self.lcfg.phase1_threads, self.agent.device) as widened:
             if widened:
                 print(f"learner: {widened}", flush=True)
-            # Whole requests with the next one in flight (prefetch.py): asked for one at a time, the
-            # round trip and the decode left the update idle (phase 1 ran at half the bench's rate).
+            # Whole requests with the next one in flight (prefetch.py), as in phase 2: the round trip
+            # and the decode overlap the updates (about 5 % more updates/s; docs/performance-log.md).
             request = wire.SampleRequest(self.lcfg.batch_size, self.per_request)
             ahead = Prefetcher(self.links.sample, lambda: request, self.stop)
             try:

@@ -34,12 +34,13 @@ def phase1_rate(metrics: Path) -> float:
 
 
 def train(run_dir: Path, args: argparse.Namespace, hidden: str, threads: int, updates: int | None = None) -> float:
+    """One run; its phase-1 rate, or 0.0 for a warm-up (``updates`` given: too short to rate)."""
     cmd = [args.laneshift, "train", "--scenario", args.scenario, "--method", args.method,
            "--env-steps", str(args.env_steps), "--run-dir", str(run_dir), "--overwrite",
            "--set", f"learner.phase1_updates={updates or args.updates}", "--set", f"learner.hidden={hidden}",
            "--set", f"learner.phase1_threads={threads}", "--set", "train.eval_episodes=0"]
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    return phase1_rate(run_dir / "metrics.jsonl")
+    return 0.0 if updates else phase1_rate(run_dir / "metrics.jsonl")
 
 
 def main(argv: list[str] | None = None) -> int:
