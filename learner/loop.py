@@ -268,7 +268,7 @@ class Learner:
             if widened:
                 print(f"learner: {widened}", flush=True)
             # Whole requests with the next one in flight (prefetch.py), as in phase 2: the round trip
-            # and the decode overlap the updates (about 5 % more updates/s; docs/performance-log.md).
+            # and the decode overlap the updates (1.13-1.18x the updates/s; docs/performance-log.md).
             request = wire.SampleRequest(self.lcfg.batch_size, self.per_request)
             ahead = Prefetcher(self.links.sample, lambda: request, self.stop)
             try:
