@@ -289,7 +289,7 @@ def bench(device: str = "auto", *, seconds: float = 3.0, rounds: int = 2, warmup
                 "name": case.name, "network": type(online).__name__, "cnn_precision": case.precision,
                 "obs_shape": list(case.obs_shape),
                 "obs_dtype": case.obs_dtype, "batch": case.batch, "n_actions": N_ACTIONS,
-                "hidden": list(case.hidden or cfg.hidden),
+                "hidden": list(_case_config(case, cfg).hidden),
                 "params": sum(p.numel() for p in online.parameters())}
             for name, runs in per_round.items():
                 rates = [r["updates_per_s"] for r in runs]
