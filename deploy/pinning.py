@@ -8,12 +8,15 @@ itself and every Ray process it started off the learner's CPU once the component
 workers started later (a restarted component) are the raylet's children and inherit its mask, so
 the learner's CPU runs the learner alone; a restarted learner pins itself back onto it.
 
-Room: deploy, the wiring. May import: the standard library and ``deploy.processes``.
+Room: deploy, the wiring. May import: the standard library, ``deploy.processes`` and the contract (``laneshift.cpus``
+moves the threads).
 """
 
 from __future__ import annotations
 
 import os
+
+from laneshift.cpus import set_thread_masks
 
 from .processes import descendants
 
@@ -28,23 +31,6 @@ def resolve_learner_core(learner_core: int, local: bool) -> int:
     return cpus[-1] if local and len(cpus) >= 2 else -1
 
 
-def _set_all_threads(pid: int, cpus: set[int]) -> bool:
-    """Every thread of ``pid`` on ``cpus`` (``sched_setaffinity(pid)`` sets one thread's only).
-    False if the process is gone or refuses; a thread that ended meanwhile is skipped."""
-    try:
-        tasks = os.listdir(f"/proc/{pid}/task")
-    except OSError:
-        return False
-    done = False
-    for task in tasks:
-        try:
-            os.sched_setaffinity(int(task), cpus)
-            done = True
-        except OSError:
-            pass
-    return done
-
-
 def pin_process(learner_core: int, learner: bool) -> str | None:
     """This process's threads on CPU ``learner_core`` (the learner) or on the node's other CPUs
     (any other component). Threads started later inherit it. Returns what was done, for the
@@ -55,7 +41,7 @@ def pin_process(learner_core: int, learner: bool) -> str | None:
     # (pin_process_tree on the raylet): the node's CPUs are that mask and the learner's.
     cpus = os.sched_getaffinity(0) | {learner_core}
     mine = {learner_core} if learner else cpus - {learner_core}
-    if len(cpus) < 2 or not _set_all_threads(os.getpid(), mine) or os.sched_getaffinity(0) != mine:
+    if len(cpus) < 2 or not set_thread_masks(mine) or os.sched_getaffinity(0) != mine:
         return f"deploy.learner_core {learner_core}: not pinned (this process may use CPUs {sorted(os.sched_getaffinity(0))})"
     return f"pinned to CPUs {sorted(mine)} (deploy.learner_core {learner_core})"
 
@@ -70,7 +56,7 @@ def restore_own_cpus(cpus: set[int] | None) -> None:
     """Every thread of this process back on ``cpus``: a launcher called as a library (the tests, a
     notebook) must not stay off the learner's CPU after its run."""
     if cpus:
-        _set_all_threads(os.getpid(), cpus)
+        set_thread_masks(cpus)
 
 
 def pin_process_tree(learner_core: int, skip: frozenset[int] | set[int] = frozenset()) -> int:
@@ -83,4 +69,4 @@ def pin_process_tree(learner_core: int, skip: frozenset[int] | set[int] = frozen
     if not others:
         return 0
     root = os.getpid()
-    return sum(_set_all_threads(pid, others) for pid in ({root} | descendants(root)) - set(skip))
+    return sum(set_thread_masks(others, pid) for pid in ({root} | descendants(root)) - set(skip))

@@ -50,7 +50,7 @@ PACKAGE_ORDER = {
 }
 CONTRACT = {"laneshift", *PACKAGE_ORDER, *(f"{p}.{m}" for p, order in PACKAGE_ORDER.items() for m in order),
             "laneshift.transport", "laneshift.envspec",
-            "laneshift.nstep", "laneshift.qnet", "laneshift.checkpoints", "laneshift.progress",
+            "laneshift.nstep", "laneshift.qnet", "laneshift.checkpoints", "laneshift.progress", "laneshift.cpus",
             "laneshift.replay_stats", "laneshift.demos", "laneshift.demos.shard",
             "laneshift.demos.checksum", "laneshift.demos.envsupport", "laneshift.demos.framestack",
             "laneshift.demos.outcomes"}

@@ -13,7 +13,8 @@ import pytest
 import torch
 
 from laneshift.config import ConfigError, LearnerConfig
-from laneshift.learner.cpus import node_cpus, phase1_cpus
+from laneshift.cpus import node_cpus
+from laneshift.learner.cpus import phase1_cpus
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "sched_getaffinity") or len(node_cpus() & os.sched_getaffinity(0)) < 2,
                                 reason="needs CPU affinity and two CPUs")
