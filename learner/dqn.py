@@ -149,7 +149,7 @@ class DoubleDQN:
         self.cfg = cfg
         self.device = resolve_device(cfg.device)
         self.online = build_q_network(obs_shape, n_actions, cfg.hidden, cfg.dueling, cfg.cnn,
-                                      cfg.cnn_precision, cfg.heads).to(self.device)
+                                      cfg.cnn_precision, cfg.heads, cfg.mlp_precision).to(self.device)
         self.target = copy.deepcopy(self.online).requires_grad_(False)
         self._params = list(self.online.parameters())
         # Weight averaging (learner.ema_decay): an exponential moving average of the online weights,

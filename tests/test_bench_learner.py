@@ -26,10 +26,13 @@ def test_bench_learner_json_shape(capsys) -> None:
     assert out["device"] == "cpu" and out["device_name"] and out["torch"] == torch.__version__
     assert out["threads"] == 1 and out["rounds"] == 2 and out["cuda"] is None
     assert [c["name"] for c in out["cases"]] == [c.name for c in bench_learner.CASES]
-    assert {c["name"]: c["cnn_precision"] for c in out["cases"]}["small-b32-bf16"] == "bf16"
+    precision = {c["name"]: c["precision"] for c in out["cases"]}
+    assert precision["small-b32-bf16"] == precision["mlp512-b256-bf16"] == "bf16" and precision["mlp-b256"] == "fp32"
     nets = {c["name"]: (c["network"], c["obs_shape"], c["obs_dtype"], c["batch"]) for c in out["cases"]}
     assert nets == {"mlp-b256": ("MLPQNetwork", [82], "float32", 256),
                     "mlp512-b256": ("MLPQNetwork", [96], "float32", 256),
+                    "mlp-b256-bf16": ("MLPQNetwork", [82], "float32", 256),
+                    "mlp512-b256-bf16": ("MLPQNetwork", [96], "float32", 256),
                     "cnn-b32": ("NatureCNN", [4, 100, 100], "uint8", 32),
                     "cnn-b64": ("NatureCNN", [4, 100, 100], "uint8", 64),
                     "small-b32": ("SmallCNN", [4, 100, 100], "uint8", 32),

@@ -87,13 +87,24 @@ class MLPQNetwork(nn.Module):
         layers.append(_head(size, n_actions, dueling, heads))
         self.net = nn.Sequential(*layers)
         self.heads, self.n_actions = heads, n_actions
+        # The hidden layers' compute dtype (``build_q_network``'s mlp_precision): None runs them in
+        # float32; bfloat16 runs them under autocast. As with the convolutions, the parameters stay
+        # float32 and the head runs in float32, so the Q-values keep float32's resolution.
+        self.trunk_dtype: torch.dtype | None = None
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         x = obs.float()
+        if self.trunk_dtype is None:
+            out = self.net(x)
+        else:
+            h = x
+            with torch.autocast(x.device.type, dtype=self.trunk_dtype):
+                for layer in list(self.net)[:-1]:  # the hidden layers (the head is last)
+                    h = layer(h)
+            out = self.net[-1](h.float())
         if self.heads == 1:
-            return self.net(x)
-        q = self.net(x).view(-1, self.heads, self.n_actions)
-        return select_head(q, x[:, -self.heads:])
+            return out
+        return select_head(out.view(-1, self.heads, self.n_actions), x[:, -self.heads:])
 
 
 class _FrameQNetwork(nn.Module):
@@ -146,18 +157,24 @@ class SmallCNN(_FrameQNetwork):
 
 CNNS = {"nature": NatureCNN, "small": SmallCNN}
 
-#: The convolutions' compute dtype per ``learner.cnn_precision``.
+#: The convolutions' (or an MLP's hidden layers') compute dtype per ``learner.cnn_precision``
+#: (``learner.mlp_precision``).
 CONV_DTYPES: dict[str, torch.dtype | None] = {"fp32": None, "bf16": torch.bfloat16}
 
 
 def build_q_network(obs_shape: tuple[int, ...], n_actions: int, hidden: tuple[int, ...] = (256, 256),
                     dueling: bool = False, cnn: str = "nature", conv_precision: str = "fp32",
-                    heads: int = 1) -> nn.Module:
-    """MLP for 1-D observations; for (stack, H, W) images the Nature CNN or the small CNN (``cnn``),
-    its convolutions computed in ``conv_precision`` (fp32 or bf16; an MLP is always fp32). ``heads``
-    > 1 (an MLP only): one Q head per value of the one-hot that ends the observation."""
+                    heads: int = 1, mlp_precision: str = "fp32") -> nn.Module:
+    """MLP for 1-D observations, its hidden layers computed in ``mlp_precision``; for (stack, H, W)
+    images the Nature CNN or the small CNN (``cnn``), its convolutions computed in ``conv_precision``
+    (fp32 or bf16 each; the head always in fp32). ``heads`` > 1 (an MLP only): one Q head per value
+    of the one-hot that ends the observation."""
     if len(obs_shape) == 1:
-        return MLPQNetwork(obs_shape[0], n_actions, hidden, dueling, heads)
+        if mlp_precision not in CONV_DTYPES:
+            raise ValueError(f"no MLP precision {mlp_precision!r} (one of {', '.join(CONV_DTYPES)})")
+        mlp = MLPQNetwork(obs_shape[0], n_actions, hidden, dueling, heads)
+        mlp.trunk_dtype = CONV_DTYPES[mlp_precision]
+        return mlp
     if heads != 1:
         raise ValueError(f"heads: one Q head per road needs a vector observation (its one-hot), got {obs_shape}")
     if len(obs_shape) == 3:

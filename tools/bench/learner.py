@@ -63,13 +63,15 @@ class Case:
     obs_dtype: str
     batch: int
     cnn: str = "nature"  # learner.cnn, for image observations
-    precision: str = "fp32"  # learner.cnn_precision
+    precision: str = "fp32"  # learner.cnn_precision (image observations) or learner.mlp_precision (vectors)
     hidden: tuple[int, ...] | None = None  # learner.hidden (None: the default)
 
 
 CASES = (
     Case("mlp-b256", (82,), "float32", 256),  # env.observation=vector, the default
     Case("mlp512-b256", (96,), "float32", 256, hidden=(512, 512)),  # the allroads network's trunk
+    Case("mlp-b256-bf16", (82,), "float32", 256, precision="bf16"),  # learner.mlp_precision=bf16
+    Case("mlp512-b256-bf16", (96,), "float32", 256, precision="bf16", hidden=(512, 512)),
     Case("cnn-b32", (4, 100, 100), "uint8", 32),  # env.observation=grayscale (the paper's)
     Case("cnn-b64", (4, 100, 100), "uint8", 64),
     Case("small-b32", (4, 100, 100), "uint8", 32, "small"),  # learner.cnn=small: the pixel runs' network
@@ -177,7 +179,9 @@ def learner_step(case: Case, cfg: LearnerConfig) -> tuple[Callable[[], None], to
 
 
 def _case_config(case: Case, cfg: LearnerConfig) -> LearnerConfig:
-    return dataclasses.replace(cfg, cnn=case.cnn, cnn_precision=case.precision, hidden=case.hidden or cfg.hidden)
+    image = len(case.obs_shape) == 3
+    return dataclasses.replace(cfg, cnn=case.cnn, cnn_precision=case.precision if image else "fp32",
+                               mlp_precision="fp32" if image else case.precision, hidden=case.hidden or cfg.hidden)
 
 
 def bare_step(case: Case, cfg: LearnerConfig, device: torch.device) -> Callable[[], None]:
@@ -189,7 +193,8 @@ def bare_step(case: Case, cfg: LearnerConfig, device: torch.device) -> Callable[
     cfg = _case_config(case, cfg)
 
     torch.manual_seed(cfg.seed)
-    online = build_q_network(case.obs_shape, N_ACTIONS, cfg.hidden, cfg.dueling, case.cnn, case.precision).to(device)
+    online = build_q_network(case.obs_shape, N_ACTIONS, cfg.hidden, cfg.dueling, case.cnn, cfg.cnn_precision,
+                             mlp_precision=cfg.mlp_precision).to(device)
     target = copy.deepcopy(online).requires_grad_(False)
     # The learner's optimizer (fused Adam, learner/dqn.py): "the same optimizer" is the fair bar.
     opt = torch.optim.Adam(online.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay, fused=device.type in ("cpu", "cuda"))
@@ -286,7 +291,7 @@ def bench(device: str = "auto", *, seconds: float = 3.0, rounds: int = 2, warmup
                 for name, step in impls.items():
                     per_round[name].append(measure(step, seconds, dev))
             row: dict[str, Any] = {
-                "name": case.name, "network": type(online).__name__, "cnn_precision": case.precision,
+                "name": case.name, "network": type(online).__name__, "precision": case.precision,
                 "obs_shape": list(case.obs_shape),
                 "obs_dtype": case.obs_dtype, "batch": case.batch, "n_actions": N_ACTIONS,
                 "hidden": list(_case_config(case, cfg).hidden),

@@ -300,6 +300,11 @@ class LearnerConfig:
     # dev machine's AMD EPYC, which has avx512_bf16 (`laneshift bench learner --cases small-b32,small-b32-bf16`).
     # A CPU without bfloat16 instructions emulates them, slower than fp32. Acting stays float32.
     cnn_precision: Literal["fp32", "bf16"] = "fp32"
+    # The same for an MLP's hidden layers (vector observations; the head and the loss stay float32).
+    # On the dev machine's Intel Xeon, whose AMX units multiply bfloat16 matrices, the 512 x 512
+    # allroads update at batch 256 ran several times as fast (`laneshift bench learner --cases
+    # mlp512-b256,mlp512-b256-bf16`); without bfloat16 instructions it is slower than fp32.
+    mlp_precision: Literal["fp32", "bf16"] = "fp32"
     augment_pad: int = 4  # the largest shift of learner.augment=shift, in pixels
     target_update_period: int = 500  # updates between hard target-network syncs
     huber_delta: float = 1.0  # the TD loss is quadratic within this distance, linear beyond
