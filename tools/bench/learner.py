@@ -323,13 +323,14 @@ def format_result(r: dict) -> str:
     head = (f"laneshift bench learner: {r['device']} ({r['device_name']}), torch {r['torch']}, "
             f"{r['threads']} thread(s), {r['rounds']} rounds x {r['seconds']:g} s alternating, updates/s "
             f"(mean [min..max])")
-    cols = (f"{'case':<14} {'network':<12} {'params':>9} {'batch':>5}  {'DoubleDQN.update':>24}  {'bare torch':>24}  "
+    w = max([4, *(len(c["name"]) for c in r["cases"])])  # the case column fits the longest name
+    cols = (f"{'case':<{w}} {'network':<12} {'params':>9} {'batch':>5}  {'DoubleDQN.update':>24}  {'bare torch':>24}  "
             f"{'ratio':>5}  {'cpu ratio':>9}")
     lines = [head, cols, "-" * len(cols)]
     for c in r["cases"]:
         cells = [f"{c[k]['updates_per_s']:.1f} [{c[k]['min']:.1f}..{c[k]['max']:.1f}]" for k in ("learner", "bare")]
         cpu = c.get("learner_over_bare_cpu")
-        lines.append(f"{c['name']:<14} {c['network']:<12} {c['params']:>9,} {c['batch']:>5}  {cells[0]:>24}  "
+        lines.append(f"{c['name']:<{w}} {c['network']:<12} {c['params']:>9,} {c['batch']:>5}  {cells[0]:>24}  "
                      f"{cells[1]:>24}  {c['learner_over_bare']:>5.2f}  {cpu if cpu is None else format(cpu, '.2f'):>9}")
     lines.append("ratio = DoubleDQN.update / bare torch in updates/s (numpy batch in, as the learner gets it, vs "
                  "resident tensors); cpu ratio = the same in updates per CPU-second of this process")

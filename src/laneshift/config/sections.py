@@ -301,9 +301,10 @@ class LearnerConfig:
     # A CPU without bfloat16 instructions emulates them, slower than fp32. Acting stays float32.
     cnn_precision: Literal["fp32", "bf16"] = "fp32"
     # The same for an MLP's hidden layers (vector observations; the head and the loss stay float32).
-    # On the dev machine's Intel Xeon, whose AMX units multiply bfloat16 matrices, the 512 x 512
-    # allroads update at batch 256 ran several times as fast (`laneshift bench learner --cases
-    # mlp512-b256,mlp512-b256-bf16`); without bfloat16 instructions it is slower than fp32.
+    # On the dev machine's Intel Xeon (AMX units multiply bfloat16 matrices) the update at batch 256
+    # ran 1.77x as fast with 512 x 512 units (178 against 101 a second) and 1.20x with 256 x 256
+    # (`laneshift bench learner --cases mlp-b256,mlp-b256-bf16,mlp512-b256,mlp512-b256-bf16`);
+    # without bfloat16 instructions it is slower than fp32.
     mlp_precision: Literal["fp32", "bf16"] = "fp32"
     augment_pad: int = 4  # the largest shift of learner.augment=shift, in pixels
     target_update_period: int = 500  # updates between hard target-network syncs
