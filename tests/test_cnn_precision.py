@@ -69,7 +69,8 @@ def test_the_learner_trains_its_bf16_hidden_layers_and_acts_in_fp32():
     agent = DoubleDQN((12,), 9, LearnerConfig(hidden=(32, 32), batch_size=16, mlp_precision="bf16", lr=1e-3,
                                               dueling=True))
     rng = np.random.default_rng(0)
-    batch = dict(obs=rng.standard_normal((16, 12), dtype=np.float32), next_obs=rng.standard_normal((16, 12), dtype=np.float32),
+    batch = dict(obs=rng.standard_normal((16, 12), dtype=np.float32),
+                 next_obs=rng.standard_normal((16, 12), dtype=np.float32),
                  action=rng.integers(0, 9, 16).astype(np.int64), reward=np.ones(16, np.float32),
                  terminated=np.ones(16, np.uint8), steps=np.ones(16, np.uint8), weight=np.ones(16, np.float32))
     first = agent.online.net[0].weight.detach().clone()
