@@ -159,7 +159,14 @@ CNNS = {"nature": NatureCNN, "small": SmallCNN}
 
 #: The convolutions' (or an MLP's hidden layers') compute dtype per ``learner.cnn_precision``
 #: (``learner.mlp_precision``).
-CONV_DTYPES: dict[str, torch.dtype | None] = {"fp32": None, "bf16": torch.bfloat16}
+COMPUTE_DTYPES: dict[str, torch.dtype | None] = {"fp32": None, "bf16": torch.bfloat16}
+
+
+def _compute_dtype(precision: str, what: str) -> torch.dtype | None:
+    """``precision``'s autocast dtype (None: float32); ``what`` names the layers in the error."""
+    if precision not in COMPUTE_DTYPES:
+        raise ValueError(f"no {what} precision {precision!r} (one of {', '.join(COMPUTE_DTYPES)})")
+    return COMPUTE_DTYPES[precision]
 
 
 def build_q_network(obs_shape: tuple[int, ...], n_actions: int, hidden: tuple[int, ...] = (256, 256),
@@ -170,20 +177,18 @@ def build_q_network(obs_shape: tuple[int, ...], n_actions: int, hidden: tuple[in
     (fp32 or bf16 each; the head always in fp32). ``heads`` > 1 (an MLP only): one Q head per value
     of the one-hot that ends the observation."""
     if len(obs_shape) == 1:
-        if mlp_precision not in CONV_DTYPES:
-            raise ValueError(f"no MLP precision {mlp_precision!r} (one of {', '.join(CONV_DTYPES)})")
+        trunk_dtype = _compute_dtype(mlp_precision, "MLP")
         mlp = MLPQNetwork(obs_shape[0], n_actions, hidden, dueling, heads)
-        mlp.trunk_dtype = CONV_DTYPES[mlp_precision]
+        mlp.trunk_dtype = trunk_dtype
         return mlp
     if heads != 1:
         raise ValueError(f"heads: one Q head per road needs a vector observation (its one-hot), got {obs_shape}")
     if len(obs_shape) == 3:
         if cnn not in CNNS:
             raise ValueError(f"no CNN {cnn!r} (one of {', '.join(CNNS)})")
-        if conv_precision not in CONV_DTYPES:
-            raise ValueError(f"no conv precision {conv_precision!r} (one of {', '.join(CONV_DTYPES)})")
+        conv_dtype = _compute_dtype(conv_precision, "conv")
         net = CNNS[cnn](tuple(obs_shape), n_actions, dueling)  # type: ignore[arg-type]
-        net.conv_dtype = CONV_DTYPES[conv_precision]
+        net.conv_dtype = conv_dtype
         return net
     raise ValueError(f"no Q-network for observation shape {obs_shape}")
 
