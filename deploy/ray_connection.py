@@ -153,8 +153,20 @@ class RayConnection:
 #: event engine failed (its log: ``epoll_wait error: Bad file descriptor``; the kernel's:
 #: ``event_engine[...]: segfault ... in cygrpc``); the next process the proxy started ran.
 CLIENT_SERVER_FAILED = "Starting Ray client server failed"
-#: ``ray://`` connections tried when the head's client server fails to start (each try starts a new one).
-CLIENT_TRIES = 3
+#: The same death seen a moment later: the proxy's ``start_specific_server`` found the child alive
+#: (``poll()``), then read its command line with psutil after it had died, and answers psutil's
+#: error instead (seen in CI: ``psutil.ZombieProcess: PID still exists but it's a zombie``).
+CLIENT_SERVER_DIED = ("psutil.ZombieProcess", "psutil.NoSuchProcess")
+#: ``ray://`` connections tried when the head's client server fails to start (each try starts a new one;
+#: about one start in three failed on a loaded 2-core head, so three tries still failed a run in ~30).
+CLIENT_TRIES = 5
+
+
+def client_server_failed_to_start(message: str) -> bool:
+    """Whether a Ray Client connection failed because the head's server process for this driver
+    died as it started (either answer above); a new connection starts a new one."""
+    return CLIENT_SERVER_FAILED in message or (
+        "start_specific_server" in message and any(s in message for s in CLIENT_SERVER_DIED))
 
 
 def _join(init: Any, address: str, tries: int = CLIENT_TRIES, out: Any = None) -> None:
@@ -166,7 +178,7 @@ def _join(init: Any, address: str, tries: int = CLIENT_TRIES, out: Any = None) -
             init(address=address, log_to_driver=False, configure_logging=False)
             return
         except Exception as exc:  # noqa: BLE001 - Ray raises many kinds
-            if not (address.startswith("ray://") and CLIENT_SERVER_FAILED in str(exc)) or attempt == tries:
+            if not (address.startswith("ray://") and client_server_failed_to_start(str(exc))) or attempt == tries:
                 raise
             print(f"Ray Client at {address}: the head's client server for this driver failed to start "
                   f"(try {attempt} of {tries}); connecting again", file=out or sys.stderr, flush=True)

@@ -39,7 +39,26 @@ def test_ray_client_connects_again_when_the_heads_client_server_failed_to_start(
     init, out = FakeInit(failed_start()), io.StringIO()
     _join(init, "ray://10.0.0.1:10001", out=out)
     assert init.calls == ["ray://10.0.0.1:10001"] * 2
-    assert "failed to start (try 1 of 3); connecting again" in out.getvalue()
+    assert f"failed to start (try 1 of {CLIENT_TRIES}); connecting again" in out.getvalue()
+
+
+def server_died_as_read() -> Exception:
+    # The same death, seen by the proxy's psutil a moment later (CI, 2026-11-27): the traceback it sends.
+    return ConnectionAbortedError(
+        "Initialization failure from server:\nTraceback (most recent call last):\n"
+        '  File ".../ray/util/client/server/proxier.py", line 767, in Datapath\n'
+        "    if not self.proxy_manager.start_specific_server(\n"
+        '  File ".../ray/util/client/server/proxier.py", line 396, in start_specific_server\n'
+        "    cmd = psutil_proc.cmdline()\n"
+        "psutil.ZombieProcess: PID still exists but it's a zombie (pid=27415)\n")
+
+
+def test_ray_client_connects_again_when_the_heads_client_server_died_as_it_was_read(monkeypatch):
+    monkeypatch.setattr("time.sleep", lambda s: None)
+    init, out = FakeInit(server_died_as_read(), failed_start()), io.StringIO()
+    _join(init, "ray://10.0.0.1:10001", out=out)
+    assert init.calls == ["ray://10.0.0.1:10001"] * 3
+    assert f"(try 2 of {CLIENT_TRIES}); connecting again" in out.getvalue()
 
 
 def test_ray_client_gives_up_after_its_tries(monkeypatch):
@@ -52,6 +71,8 @@ def test_ray_client_gives_up_after_its_tries(monkeypatch):
 
 @pytest.mark.parametrize("address, error", [
     ("ray://10.0.0.1:10001", ConnectionError("ray client connection timeout")),  # another failure
+    # psutil's error from somewhere other than the start of the driver's server
+    ("ray://10.0.0.1:10001", ConnectionAbortedError("in get_node_info\npsutil.NoSuchProcess: process gone")),
     ("10.0.0.1:6379", RuntimeError(CLIENT_SERVER_FAILED)),  # not Ray Client: no client server to restart
 ])
 def test_any_other_failure_is_raised_at_once(address, error):
