@@ -2,9 +2,11 @@
 a copy of the network the run hands out (``DoubleDQN.policy_net``) played greedily on a background
 thread, by the ``EvaluatePolicy`` the builder hands the learner (``laneshift.actors.evaluation``:
 the learner never imports the simulator itself), and its result written to the run's metrics
-(``eval/*``).
+(``eval/*``). The thread runs on the node's CPUs other than a pinned learner's
+(``learner.cpus.beside_the_learner``): it plays episodes, env work, which belongs where the workers are.
 
-Room: learner. May import: torch, numpy, the contract (``laneshift.qnet``) and ``learner.metrics``.
+Room: learner. May import: torch, numpy, the contract (``laneshift.qnet``), ``learner.metrics`` and
+``learner.cpus``.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import torch
 
 from laneshift.qnet import build_q_network
 
+from .cpus import beside_the_learner
 from .metrics import MetricsLog
 
 
@@ -53,6 +56,8 @@ class GreedyEval:
                             "dueling": dueling, "cnn": cnn, "heads": heads}
         self.next_at = every
         self.failed: str | None = None
+        #: Where the last evaluation's thread ran when it moved off a pinned learner's CPU (None: it did not).
+        self.placement: str | None = None
         self._thread: threading.Thread | None = None
         self._result: dict | None = None
         self._cancel = threading.Event()
@@ -90,6 +95,7 @@ class GreedyEval:
 
     def _run(self, state: dict[str, torch.Tensor], info: dict) -> None:
         began = time.monotonic()
+        self.placement = beside_the_learner()
         try:
             net = build_q_network(**self._net_kwargs)
             net.load_state_dict(state)
