@@ -5,6 +5,7 @@ updates between the first and the last phase-1 record over the time between them
 
     python tools/bench/scripts/phase1_threads.py --rounds 2 --hidden 256,256 512,512
     python tools/bench/scripts/phase1_threads.py --threads 0 --laneshift OTHER_CHECKOUT/.venv/bin/laneshift
+    python tools/bench/scripts/phase1_threads.py --hidden 512,512 --set learner.mlp_precision=bf16
 
 Needs a quiet machine (a training run beside it measures the other run). The demo shard is made
 by the first (untimed) run and reused.
@@ -39,6 +40,8 @@ def train(run_dir: Path, args: argparse.Namespace, hidden: str, threads: int, up
            "--env-steps", str(args.env_steps), "--run-dir", str(run_dir), "--overwrite",
            "--set", f"learner.phase1_updates={updates or args.updates}", "--set", f"learner.hidden={hidden}",
            "--set", f"learner.phase1_threads={threads}", "--set", "train.eval_episodes=0"]
+    for extra in args.set:
+        cmd += ["--set", extra]
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     return 0.0 if updates else phase1_rate(run_dir / "metrics.jsonl")
 
@@ -52,6 +55,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--scenario", default="merge")
     p.add_argument("--method", default="dqfd-bc-alongside-gaps-safe-shield")
     p.add_argument("--threads", default="1,0", help="learner.phase1_threads values, alternated (default 1,0)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="a config value for every run (repeatable), e.g. learner.mlp_precision=bf16")
     p.add_argument("--laneshift", default=str(Path(sys.executable).with_name("laneshift")),
                    help="the laneshift command (another checkout's, to compare two revisions)")
     args = p.parse_args(argv)
