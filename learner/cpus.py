@@ -11,10 +11,6 @@ docs/performance-log.md). Why only phase 1: in phase 2 the workers, the replay s
 router use the other CPUs, and a second learner thread there made runs slower
 (``learner/process.py``).
 
-``beside_the_learner`` is the other half: the greedy evaluation during training
-(``learner.periodic_eval``) is not the learner's work, so its thread leaves the learner's pinned
-CPU for the node's other CPUs (where the workers run), instead of taking turns with the updates.
-
 Room: learner (component). May import: the standard library, torch and the contract
 (``laneshift.cpus`` moves the threads).
 """
@@ -28,23 +24,6 @@ from contextlib import contextmanager
 import torch
 
 from laneshift.cpus import node_cpus, set_thread_masks, thread_masks
-
-
-def beside_the_learner() -> str | None:
-    """The calling thread (only it: Linux masks are per thread) onto the node's CPUs other than the
-    ones this process is pinned to, when it is pinned to some of them (``deploy.learner_core``).
-    Returns a line for the log, or None where nothing changes (not pinned, one CPU, no affinity)."""
-    if not hasattr(os, "sched_getaffinity"):
-        return None
-    mine = os.sched_getaffinity(0)
-    others = node_cpus() - mine
-    if not others:
-        return None
-    try:
-        os.sched_setaffinity(0, others)
-    except OSError:  # the cgroup refuses those CPUs: stay where the learner is
-        return None
-    return f"on CPUs {sorted(os.sched_getaffinity(0))}, off the learner's {sorted(mine)}"
 
 
 @contextmanager

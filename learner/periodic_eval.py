@@ -2,11 +2,9 @@
 a copy of the network the run hands out (``DoubleDQN.policy_net``) played greedily on a background
 thread, by the ``EvaluatePolicy`` the builder hands the learner (``laneshift.actors.evaluation``:
 the learner never imports the simulator itself), and its result written to the run's metrics
-(``eval/*``). The thread runs on the node's CPUs other than a pinned learner's
-(``learner.cpus.beside_the_learner``): it plays episodes, env work, which belongs where the workers are.
+(``eval/*``).
 
-Room: learner. May import: torch, numpy, the contract (``laneshift.qnet``), ``learner.metrics`` and
-``learner.cpus``.
+Room: learner. May import: torch, numpy, the contract (``laneshift.qnet``) and ``learner.metrics``.
 """
 
 from __future__ import annotations
@@ -20,7 +18,6 @@ import torch
 
 from laneshift.qnet import build_q_network
 
-from .cpus import beside_the_learner
 from .metrics import MetricsLog
 
 
@@ -56,8 +53,6 @@ class GreedyEval:
                             "dueling": dueling, "cnn": cnn, "heads": heads}
         self.next_at = every
         self.failed: str | None = None
-        #: Where the last evaluation's thread ran when it moved off a pinned learner's CPU (None: it did not).
-        self.placement: str | None = None
         self._thread: threading.Thread | None = None
         self._result: dict | None = None
         self._cancel = threading.Event()
@@ -95,7 +90,6 @@ class GreedyEval:
 
     def _run(self, state: dict[str, torch.Tensor], info: dict) -> None:
         began = time.monotonic()
-        self.placement = beside_the_learner()
         try:
             net = build_q_network(**self._net_kwargs)
             net.load_state_dict(state)

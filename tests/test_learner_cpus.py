@@ -1,7 +1,6 @@
 """``learner.cpus.phase1_cpus``: phase 1 lifts the learner's pin and widens torch's threads, then puts
 back every thread's own mask and the thread count; a GPU learner and ``learner.phase1_threads=1``
-change nothing. ``beside_the_learner``: the greedy evaluation's thread leaves a pinned
-learner's CPU. Real affinity calls on this process, restored by each test.
+change nothing. Real affinity calls on this process, restored by each test.
 
 Room: tests, unit. May import: laneshift (any floor), pytest, torch and the standard library."""
 
@@ -15,9 +14,7 @@ import torch
 
 from laneshift.config import ConfigError, LearnerConfig
 from laneshift.cpus import node_cpus
-from laneshift.learner.cpus import beside_the_learner, phase1_cpus
-from laneshift.learner.periodic_eval import GreedyEval
-from laneshift.qnet import build_q_network
+from laneshift.learner.cpus import phase1_cpus
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "sched_getaffinity") or len(node_cpus() & os.sched_getaffinity(0)) < 2,
                                 reason="needs CPU affinity and two CPUs")
@@ -92,44 +89,3 @@ def test_nothing_changes_for_one_thread_or_a_gpu(pinned_to_one_cpu, threads, dev
 def test_config_refuses_a_bad_thread_count(bad):
     with pytest.raises(ConfigError, match="learner.phase1_threads"):
         LearnerConfig(phase1_threads=bad)
-
-
-def _in_a_thread(fn):
-    out = {}
-    t = threading.Thread(target=lambda: out.update(result=fn(), mask=os.sched_getaffinity(0)))
-    t.start()
-    t.join(30)
-    return out
-
-
-def test_a_thread_beside_a_pinned_learner_leaves_its_cpu(pinned_to_one_cpu):
-    out = _in_a_thread(beside_the_learner)
-    others = node_cpus() - {pinned_to_one_cpu}
-    assert out["mask"] == others and out["result"] == f"on CPUs {sorted(others)}, off the learner's " \
-                                                      f"[{pinned_to_one_cpu}]"
-    assert os.sched_getaffinity(0) == {pinned_to_one_cpu}  # the learner's own thread stays
-
-
-def test_an_unpinned_learner_moves_nothing():
-    mask = os.sched_getaffinity(0)
-    if node_cpus() - mask:
-        pytest.skip("this process is pinned already")
-    out = _in_a_thread(beside_the_learner)
-    assert out["result"] is None and out["mask"] == mask
-
-
-def test_the_greedy_evaluation_plays_off_the_learners_cpu(pinned_to_one_cpu):
-    seen = {}
-
-    def evaluate(policy):  # what the builder's evaluation does, minus the simulator
-        seen["mask"] = os.sched_getaffinity(0)
-        actions = policy(torch.zeros(3, 8).numpy())
-        return {"survival_rate": 1.0, "return_mean": 0.0, "episodes": len(actions)}
-
-    ev = GreedyEval(evaluate, every=10, obs_shape=(8,), n_actions=9, hidden=(16,), dueling=False)
-    ev.start(build_q_network((8,), 9, (16,), False), env_steps=10, version=1)
-    ev.close(timeout=30)
-    result = ev.take()
-    assert result is not None and result["episodes"] == 3
-    assert seen["mask"] == node_cpus() - {pinned_to_one_cpu} and ev.placement is not None
-    assert os.sched_getaffinity(0) == {pinned_to_one_cpu}
