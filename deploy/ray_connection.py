@@ -158,7 +158,7 @@ CLIENT_SERVER_FAILED = "Starting Ray client server failed"
 #: error instead (seen in CI: ``psutil.ZombieProcess: PID still exists but it's a zombie``).
 CLIENT_SERVER_DIED = ("psutil.ZombieProcess", "psutil.NoSuchProcess")
 #: ``ray://`` connections tried when the head's client server fails to start (each try starts a new one;
-#: about one start in three failed on a loaded 2-core head, so three tries still failed a run in ~30).
+#: about one start in three failed on a loaded 2-core head, so three tries would still fail about one run in 27).
 CLIENT_TRIES = 5
 
 
