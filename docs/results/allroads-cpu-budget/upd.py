@@ -18,12 +18,10 @@ import time
 import numpy as np
 import torch
 
-sys.path.insert(0, "tools/bench")
-import learner as bench  # noqa: E402 - tools/bench/learner.py: its batches and Case
-
-from laneshift.config import LearnerConfig  # noqa: E402
-from laneshift.config.loading import load_run_config  # noqa: E402
-from laneshift.learner.dqn import DoubleDQN  # noqa: E402
+from laneshift.config import LearnerConfig
+from laneshift.config.loading import load_run_config
+from laneshift.learner.dqn import DoubleDQN
+from laneshift.tools.bench import learner as bench  # `laneshift bench learner`: its batches and Case
 
 OBS_DIM, HEADS = 96, 4  # the allroads vector observation; its road one-hot ends it
 torch.set_num_threads(1)
