@@ -31,10 +31,12 @@ component, deploy or a tool.
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 from laneshift import wire
@@ -114,6 +116,8 @@ class _FrameQNetwork(nn.Module):
     def __init__(self, features: nn.Sequential, in_shape: tuple[int, int, int], units: int, n_actions: int,
                  dueling: bool):
         super().__init__()
+        if not isinstance(features[0], nn.Conv2d):
+            raise TypeError("the features must start with a Conv2d (forward folds the 1/255 scale into it)")
         self.features = features
         with torch.no_grad():
             flat = self.features(torch.zeros(1, *in_shape)).shape[1]
@@ -125,11 +129,18 @@ class _FrameQNetwork(nn.Module):
         self.conv_dtype: torch.dtype | None = None
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        frames = obs.float() / 255.0
-        if self.conv_dtype is None:
-            return self.head(self.features(frames))
-        with torch.autocast(frames.device.type, dtype=self.conv_dtype):
-            features = self.features(frames)
+        # conv(frames / 255) computed as conv(frames) with the first layer's weights / 255: the
+        # frames go from uint8 to the compute dtype in one pass (0..255 are exact in bfloat16 too),
+        # not through float32 and a division, which took about 40 % of SmallCNN's bf16 update at
+        # batch 32 on one CPU thread (torch.profiler; `laneshift bench learner`: docs/RESULTS.md).
+        dtype = self.conv_dtype or torch.float32
+        first, rest = self.features[0], self.features[1:]
+        autocast = (contextlib.nullcontext() if self.conv_dtype is None
+                    else torch.autocast(obs.device.type, dtype=self.conv_dtype))
+        with autocast:
+            h = F.conv2d(obs.to(dtype), (first.weight * (1.0 / 255.0)).to(dtype), first.bias.to(dtype),
+                         first.stride, first.padding)
+            features = rest(h)
         return self.head(features.float())
 
 
