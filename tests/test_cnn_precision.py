@@ -98,12 +98,13 @@ def test_the_learner_trains_its_bf16_convolutions():
 
 @pytest.mark.parametrize("cnn", ["small", "nature"])
 def test_the_folded_scale_gives_the_q_values_of_frames_divided_by_255(cnn):
-    # forward folds 1/255 into the first convolution's weights (frames cast once, no division):
+    # on the CPU forward folds 1/255 into the first convolution's weights (frames cast once, no division):
     # the same function as the layers applied to frames / 255, in float32 to float32's rounding.
     torch.manual_seed(0)
     net = build_q_network((4, 100, 100), 9, cnn=cnn)
     frames = torch.randint(0, 256, (8, 4, 100, 100), dtype=torch.uint8, generator=torch.Generator().manual_seed(2))
     reference = net.head(net.features(frames.float() / 255.0))
-    torch.testing.assert_close(net(frames), reference, rtol=1e-5, atol=1e-6)
+    torch.testing.assert_close(net(frames), reference, rtol=1e-5, atol=1e-6)  # forward folds on the CPU
+    torch.testing.assert_close(net.scaled_features(frames, fold=False), net.features(frames.float() / 255.0))
     net(frames).sum().backward()  # the gradient reaches the stored (unscaled) weights
     assert net.features[0].weight.grad is not None and net.features[0].weight.grad.abs().sum() > 0

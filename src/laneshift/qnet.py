@@ -129,19 +129,28 @@ class _FrameQNetwork(nn.Module):
         self.conv_dtype: torch.dtype | None = None
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        # conv(frames / 255) computed as conv(frames) with the first layer's weights / 255: the
-        # frames go from uint8 to the compute dtype in one pass (0..255 are exact in bfloat16 too),
-        # not through float32 and a division, which took about 40 % of SmallCNN's bf16 update at
-        # batch 32 on one CPU thread (torch.profiler; `laneshift bench learner`: docs/RESULTS.md).
-        dtype = self.conv_dtype or torch.float32
-        first, rest = self.features[0], self.features[1:]
+        return self.head(self.scaled_features(obs, fold=obs.device.type == "cpu").float())
+
+    def scaled_features(self, obs: torch.Tensor, fold: bool) -> torch.Tensor:
+        """The convolutions' output for raw frames (0-255), computed as the layers over frames / 255.
+
+        ``fold`` (what forward uses on the CPU): conv(frames / 255) computed as conv(frames) with the
+        first layer's weights / 255, the frames cast once to the compute dtype (0..255 are exact in
+        bfloat16 too) instead of a float32 pass and a division, which took about 40 % of SmallCNN's
+        bf16 update at batch 32 on one CPU thread (torch.profiler). Not on CUDA: there the fold made
+        the update 0.83-0.92x in float32 on an H100 (docs/results/pixels-gpu/fold_ab-h100.jsonl).
+        """
         autocast = (contextlib.nullcontext() if self.conv_dtype is None
                     else torch.autocast(obs.device.type, dtype=self.conv_dtype))
+        if not fold:
+            with autocast:
+                return self.features(obs.float() / 255.0)
+        dtype = self.conv_dtype or torch.float32
+        first, rest = self.features[0], self.features[1:]
         with autocast:
             h = F.conv2d(obs.to(dtype), (first.weight * (1.0 / 255.0)).to(dtype), first.bias.to(dtype),
                          first.stride, first.padding)
-            features = rest(h)
-        return self.head(features.float())
+            return rest(h)
 
 
 class NatureCNN(_FrameQNetwork):
