@@ -228,6 +228,8 @@ def checkpoint_env_settings(meta: Mapping[str, str]) -> dict[str, str | bool | f
     {'observation': 'vector', 'alongside_features': True}
     >>> checkpoint_env_settings({"obs_shape": "88", "shield": "1", "shield_gap": "2.0"})
     {'observation': 'vector', 'shield': True, 'shield_gap': 2.0}
+    >>> checkpoint_env_settings({"obs_shape": "4,100,100", "frame_supersample": "4"})
+    {'observation': 'grayscale', 'frame_supersample': 4}
     """
     out: dict[str, str | bool | float] = {}
     dims = [d for d in str(meta.get("obs_shape", "")).split(",") if d.strip()]
@@ -244,9 +246,9 @@ def checkpoint_env_settings(meta: Mapping[str, str]) -> dict[str, str | bool | f
         if isinstance(getattr(defaults, option), bool):  # "0" / "1"
             if raw in ("0", "1"):
                 out[option] = raw == "1"
-        elif raw:  # a figure (the shield's)
+        elif raw:  # a count (the frames' supersampling) or a figure (the shield's)
             try:
-                out[option] = float(raw)
+                out[option] = int(raw) if isinstance(getattr(defaults, option), int) else float(raw)
             except ValueError:
                 pass  # not this version's writing: the env's default stands, as for an older checkpoint
     return out

@@ -94,6 +94,7 @@ class LaneChangeEnv(LaneQueries, Driving, PolicyVehicles, gym.Env):
         observation_shape: Sequence[int] = (100, 100),
         stack_size: int = 4,
         scaling: float = 2.0,
+        frame_supersample: int = 1,
         vehicles_observed: int = 8,
         lane_features: bool = True,
         alongside_features: bool = False,
@@ -153,6 +154,8 @@ class LaneChangeEnv(LaneQueries, Driving, PolicyVehicles, gym.Env):
         self.observation_shape = (int(shape[0]), int(shape[1]))
         self.stack_size = _int_arg("stack_size", stack_size, 1)
         self.scaling = _float_arg("scaling", scaling, 0.0, lo_open=True)
+        # Grayscale frames drawn at k x the resolution and block-averaged (anti-aliased; rendering.py).
+        self.frame_supersample = _int_arg("frame_supersample", frame_supersample, 1, 8)
         self.vehicles_observed = _int_arg("vehicles_observed", vehicles_observed, 0)
         if not isinstance(lane_features, (bool, np.bool_)):
             raise ValueError(f"lane_features must be True or False, got {lane_features!r}")
@@ -417,7 +420,8 @@ class LaneChangeEnv(LaneQueries, Driving, PolicyVehicles, gym.Env):
         if self.observation_type == "vector":
             return self._vector_obs(self.ego)
         if self._obs_renderer is None:
-            self._obs_renderer = TopDownRenderer(self.layout, self.observation_shape, self.scaling, grayscale=True)
+            self._obs_renderer = TopDownRenderer(self.layout, self.observation_shape, self.scaling, grayscale=True,
+                                                 supersample=self.frame_supersample)
         frame = self._draw(self._obs_renderer)
         if self._frames is None:  # first frame of an episode fills the whole stack
             self._frames = np.repeat(frame[None], self.stack_size, axis=0)

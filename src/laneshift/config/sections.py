@@ -33,6 +33,10 @@ class EnvConfig:
     # straight | merge | curve | roundabout | allroads (the four roads, one network) | lka, or a full gymnasium id
     scenario: str = "straight"
     observation: Literal["vector", "grayscale"] = "vector"  # vector (fast, CPU default) | grayscale (paper: 4 x 100 x 100)
+    # grayscale only: frames drawn at k times the resolution and each k x k block averaged (anti-aliased:
+    # a car's position inside a pixel shows in its edge's grey; 1 = pygame's whole-pixel polygons).
+    # Recorded in checkpoints.
+    frame_supersample: int = 1
     reward_preset: int = 5  # Table 1 condition (lane-change scenarios only)
     max_steps: int = 0  # 0 = the scenario's default episode length (allroads: 300 on every road)
     initial_lane: Literal["random", "non-target"] = "random"  # random | non-target
@@ -75,6 +79,11 @@ class EnvConfig:
                "extends the lane features: it needs env.lane_features=true", self.gap_features)
         _check(not (self.shield and (self.is_lka or self.action_set != "paper")), "env.shield",
                "guards the lane changes of the paper action set (not lka, not action_set=meta)", self.shield)
+        _check(isinstance(self.frame_supersample, int) and not isinstance(self.frame_supersample, bool)
+               and 1 <= self.frame_supersample <= 8, "env.frame_supersample", "must be an integer 1..8",
+               self.frame_supersample)
+        _check(self.frame_supersample == 1 or self.observation == "grayscale", "env.frame_supersample",
+               "draws the grayscale frames: it needs env.observation=grayscale", self.frame_supersample)
         _check(self.shield_gap > 0, "env.shield_gap", "must be > 0 m", self.shield_gap)
         _check(0 < self.shield_decel <= 1.0, "env.shield_decel",
                "must be in (0, 1] m/s^2 (the paper actions change the speed by at most 1 m/s^2)", self.shield_decel)
@@ -115,6 +124,8 @@ class EnvConfig:
             kw["shield_gap"] = self.shield_gap
         if self.shield_decel != SHIELD_DECEL:
             kw["shield_decel"] = self.shield_decel
+        if self.frame_supersample != 1:
+            kw["frame_supersample"] = self.frame_supersample
         if self.road:
             kw["road"] = self.road
         return kw
