@@ -82,3 +82,15 @@ def test_an_evaluation_rebuilds_the_supersampled_env_from_a_checkpoint():
     settings = checkpoint_env_settings({"obs_shape": "4,100,100", "obs_dtype": "|u1", "frame_supersample": "4"})
     assert settings == {"observation": "grayscale", "frame_supersample": 4}
     assert EnvConfig(**settings).env_kwargs()["frame_supersample"] == 4
+
+
+@pytest.mark.parametrize("k", [2, 4, 8])
+def test_the_downsample_is_each_blocks_rounded_mean(k):
+    env = make_env("straight", observation="grayscale").unwrapped
+    renderer = TopDownRenderer(env.layout, (10, 12), 2.0, grayscale=True, supersample=k)
+    rng = np.random.default_rng(k)
+    for drawn in (rng.integers(0, 256, (10 * k, 12 * k), dtype=np.uint8),
+                  rng.integers(0, 256, (10 * k, 12 * k, 3), dtype=np.uint8)):
+        blocks = drawn.reshape(10, k, 12, k, *drawn.shape[2:]).astype(np.float64)
+        expected = np.floor(blocks.mean(axis=(1, 3)) + 0.5).astype(np.uint8)  # half up, as the code rounds
+        np.testing.assert_array_equal(renderer._downsample(drawn), expected)
