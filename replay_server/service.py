@@ -275,7 +275,8 @@ def build_core(cfg: RunConfig, spec: EnvSpec, shard: int = 0) -> ReplayCore:
 #: joins the digest only when a run sets it, so a run started before it existed still resumes
 #: (``laneshift train --resume``) on the version that added it. Add every new env field here.
 ENV_FIELDS_ADDED_LATER: dict[str, object] = {"alongside_features": False, "gap_features": False, "shield": False,
-                                             "shield_gap": SHIELD_GAP, "shield_decel": SHIELD_DECEL}
+                                             "shield_gap": SHIELD_GAP, "shield_decel": SHIELD_DECEL,
+                                             "frame_supersample": 1}
 
 
 def config_digest(cfg: RunConfig, shard: int = 0) -> str:
