@@ -12,15 +12,16 @@ import sys
 
 import numpy as np
 
-from laneshift.actors.evaluation import load_checkpoint_policy
+from laneshift.actors.evaluation import checkpoint_env_settings, load_checkpoint_policy
 from laneshift.actors.envs.lane_change import LaneChangeEnv
 from laneshift.actors.envs.traffic import collisions
 ck, n = sys.argv[1], int(sys.argv[2])
 cp = load_checkpoint_policy(ck); act = cp.greedy()
-obs_kind = "grayscale" if len(cp.obs_shape) == 3 else "vector"
+# The env the network was trained in, as far as its checkpoint says (observation, frame supersampling).
+env_kwargs = {k: v for k, v in checkpoint_env_settings(cp.meta).items() if k != "scenario"}
 stats = collections.Counter(); rows = []
 for ep in range(n):
-    env = LaneChangeEnv(observation=obs_kind, initial_lane="random")
+    env = LaneChangeEnv(**env_kwargs, initial_lane="random")
     o, info = env.reset(seed=200000 + ep)
     prev_lane = info["lane_index"]; lanes_seen = []
     for t in range(300):
