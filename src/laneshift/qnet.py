@@ -137,8 +137,9 @@ class _FrameQNetwork(nn.Module):
         ``fold`` (what forward uses on the CPU): conv(frames / 255) computed as conv(frames) with the
         first layer's weights / 255, the frames cast once to the compute dtype (0..255 are exact in
         bfloat16 too) instead of a float32 pass and a division, which took about 40 % of SmallCNN's
-        bf16 update at batch 32 on one CPU thread (torch.profiler). Not on CUDA: there the fold made
-        the update 0.83-0.92x in float32 on an H100 (docs/results/pixels-gpu/fold_ab-h100.jsonl).
+        bf16 update at batch 32 on one CPU thread (torch.profiler); the update ran 1.10x (float32) and
+        1.22x (bf16) as fast (docs/results/pixels-gpu/fold_ab.py, A B A B). Not on CUDA: there the fold
+        made the update 0.83-0.92x in float32 on an H100 (docs/results/pixels-gpu/fold_ab-h100.jsonl).
         """
         autocast = (contextlib.nullcontext() if self.conv_dtype is None
                     else torch.autocast(obs.device.type, dtype=self.conv_dtype))
