@@ -230,6 +230,8 @@ def checkpoint_env_settings(meta: Mapping[str, str]) -> dict[str, str | bool | f
     {'observation': 'vector', 'shield': True, 'shield_gap': 2.0}
     >>> checkpoint_env_settings({"obs_shape": "4,100,100", "frame_supersample": "4"})
     {'observation': 'grayscale', 'frame_supersample': 4}
+    >>> checkpoint_env_settings({"obs_shape": "4,100,100", "frame_interval": "3"})
+    {'observation': 'grayscale', 'frame_interval': 3}
     """
     out: dict[str, str | bool | float] = {}
     dims = [d for d in str(meta.get("obs_shape", "")).split(",") if d.strip()]

@@ -134,6 +134,8 @@ def default_demo_dir(cfg: RunConfig, episodes: int) -> Path:
     shape = "x".join(str(d) for d in spec_of(env).schema.obs_shape)
     if env.frame_supersample != 1:  # the frames are drawn otherwise: another shard
         shape += f"-ss{env.frame_supersample}"
+    if env.frame_interval != 1:  # the stacked frames lie further apart in time: another shard
+        shape += f"-fi{env.frame_interval}"
     scenario = env.scenario.replace('/', '_') + (f"-{env.road}" if env.road else "")  # allroads pinned to one road
     shield = "-shield" if env.shield else ""  # the driver drove behind the shield
     name = f"{scenario}-{env.observation}{shape}-p{env.reward_preset}{shield}-scripted-v{ScriptedDriver.VERSION}-{episodes}ep"

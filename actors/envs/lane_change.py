@@ -95,6 +95,7 @@ class LaneChangeEnv(LaneQueries, Driving, PolicyVehicles, gym.Env):
         stack_size: int = 4,
         scaling: float = 2.0,
         frame_supersample: int = 1,
+        frame_interval: int = 1,
         vehicles_observed: int = 8,
         lane_features: bool = True,
         alongside_features: bool = False,
@@ -156,6 +157,9 @@ class LaneChangeEnv(LaneQueries, Driving, PolicyVehicles, gym.Env):
         self.scaling = _float_arg("scaling", scaling, 0.0, lo_open=True)
         # Grayscale frames drawn at k x the resolution and block-averaged (anti-aliased; rendering.py).
         self.frame_supersample = _int_arg("frame_supersample", frame_supersample, 1, 8)
+        # Policy steps between two stacked frames: the stack spans (stack_size - 1) x frame_interval steps,
+        # so a speed difference moves a car frame_interval times as many pixels between its frames.
+        self.frame_interval = _int_arg("frame_interval", frame_interval, 1, 30)
         self.vehicles_observed = _int_arg("vehicles_observed", vehicles_observed, 0)
         if not isinstance(lane_features, (bool, np.bool_)):
             raise ValueError(f"lane_features must be True or False, got {lane_features!r}")
@@ -223,6 +227,7 @@ class LaneChangeEnv(LaneQueries, Driving, PolicyVehicles, gym.Env):
         self.steps = 0
         self.time = 0.0
         self.anchor = np.zeros(n_all)
+        # The last (stack_size - 1) x frame_interval + 1 frames, oldest first; every frame_interval-th is observed.
         self._frames: np.ndarray | None = None
         self._obs_renderer: TopDownRenderer | None = None
         self._rgb_renderer: TopDownRenderer | None = None
@@ -423,12 +428,12 @@ class LaneChangeEnv(LaneQueries, Driving, PolicyVehicles, gym.Env):
             self._obs_renderer = TopDownRenderer(self.layout, self.observation_shape, self.scaling, grayscale=True,
                                                  supersample=self.frame_supersample)
         frame = self._draw(self._obs_renderer)
-        if self._frames is None:  # first frame of an episode fills the whole stack
-            self._frames = np.repeat(frame[None], self.stack_size, axis=0)
+        if self._frames is None:  # first frame of an episode fills the whole history
+            self._frames = np.repeat(frame[None], (self.stack_size - 1) * self.frame_interval + 1, axis=0)
         else:
             self._frames = np.roll(self._frames, -1, axis=0)
             self._frames[-1] = frame
-        return self._frames.copy()
+        return self._frames[::self.frame_interval].copy()  # the newest frame is last whatever the interval
 
     def _draw(self, renderer: TopDownRenderer) -> np.ndarray:
         t = self.traffic

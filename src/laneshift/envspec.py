@@ -25,11 +25,11 @@ from .wire import TransitionSchema
 
 
 #: The env options a network was trained with that an evaluation must repeat (EnvConfig fields of the
-#: same names): those that change the vector observation's layout, how the frames are drawn, and the
+#: same names): those that change the vector observation's layout, how the frames are drawn and spaced, and the
 #: shield and its figures, which change what an action does. A learner checkpoint's metadata carries
 #: those the run set, so an evaluation can build the same env.
 RECORDED_ENV_OPTIONS = ("lane_features", "alongside_features", "gap_features", "shield", "shield_gap",
-                        "shield_decel", "frame_supersample")
+                        "shield_decel", "frame_supersample", "frame_interval")
 
 #: Scenario name -> gymnasium id (registered by importing ``laneshift.actors.envs``).
 SCENARIOS: dict[str, str] = {

@@ -37,6 +37,10 @@ class EnvConfig:
     # a car's position inside a pixel shows in its edge's grey; 1 = pygame's whole-pixel polygons).
     # Recorded in checkpoints.
     frame_supersample: int = 1
+    # grayscale only: policy steps between two stacked frames (1 = the last 4 frames; k: the frames
+    # at t, t-k, t-2k, t-3k, so a speed difference moves a car k times as many pixels between them).
+    # Recorded in checkpoints.
+    frame_interval: int = 1
     reward_preset: int = 5  # Table 1 condition (lane-change scenarios only)
     max_steps: int = 0  # 0 = the scenario's default episode length (allroads: 300 on every road)
     initial_lane: Literal["random", "non-target"] = "random"  # random | non-target
@@ -84,6 +88,11 @@ class EnvConfig:
                self.frame_supersample)
         _check(self.frame_supersample == 1 or self.observation == "grayscale", "env.frame_supersample",
                "draws the grayscale frames: it needs env.observation=grayscale", self.frame_supersample)
+        _check(isinstance(self.frame_interval, int) and not isinstance(self.frame_interval, bool)
+               and 1 <= self.frame_interval <= 30, "env.frame_interval", "must be an integer 1..30",
+               self.frame_interval)
+        _check(self.frame_interval == 1 or self.observation == "grayscale", "env.frame_interval",
+               "spaces the stacked grayscale frames: it needs env.observation=grayscale", self.frame_interval)
         _check(self.shield_gap > 0, "env.shield_gap", "must be > 0 m", self.shield_gap)
         _check(0 < self.shield_decel <= 1.0, "env.shield_decel",
                "must be in (0, 1] m/s^2 (the paper actions change the speed by at most 1 m/s^2)", self.shield_decel)
@@ -126,6 +135,8 @@ class EnvConfig:
             kw["shield_decel"] = self.shield_decel
         if self.frame_supersample != 1:
             kw["frame_supersample"] = self.frame_supersample
+        if self.frame_interval != 1:
+            kw["frame_interval"] = self.frame_interval
         if self.road:
             kw["road"] = self.road
         return kw
