@@ -232,6 +232,8 @@ def checkpoint_env_settings(meta: Mapping[str, str]) -> dict[str, str | bool | f
     {'observation': 'grayscale', 'frame_supersample': 4}
     >>> checkpoint_env_settings({"obs_shape": "4,100,100", "frame_interval": "3"})
     {'observation': 'grayscale', 'frame_interval': 3}
+    >>> checkpoint_env_settings({"obs_shape": "4,100,100", "frame_centering": "0.3"})
+    {'observation': 'grayscale', 'frame_centering': 0.3}
     """
     out: dict[str, str | bool | float] = {}
     dims = [d for d in str(meta.get("obs_shape", "")).split(",") if d.strip()]

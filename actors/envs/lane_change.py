@@ -57,13 +57,15 @@ def _int_arg(name: str, value: Any, lo: int, hi: int | None = None) -> int:
     return int(value)
 
 
-def _float_arg(name: str, value: Any, lo: float, hi: float = math.inf, lo_open: bool = False) -> float:
+def _float_arg(name: str, value: Any, lo: float, hi: float = math.inf, lo_open: bool = False,
+               hi_open: bool = False) -> float:
     try:
         v = float(value)
     except (TypeError, ValueError):
         raise ValueError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(v) or v < lo or v > hi or (lo_open and v == lo):
-        raise ValueError(f"{name} must be in {'(' if lo_open else '['}{lo}, {hi}], got {value!r}")
+    if not math.isfinite(v) or v < lo or v > hi or (lo_open and v == lo) or (hi_open and v == hi):
+        interval = f"{'(' if lo_open else '['}{lo}, {hi}{')' if hi_open else ']'}"
+        raise ValueError(f"{name} must be in {interval}, got {value!r}")
     return v
 
 
@@ -96,6 +98,7 @@ class LaneChangeEnv(LaneQueries, Driving, PolicyVehicles, gym.Env):
         scaling: float = 2.0,
         frame_supersample: int = 1,
         frame_interval: int = 1,
+        frame_centering: float = 0.5,
         vehicles_observed: int = 8,
         lane_features: bool = True,
         alongside_features: bool = False,
@@ -160,6 +163,8 @@ class LaneChangeEnv(LaneQueries, Driving, PolicyVehicles, gym.Env):
         # Policy steps between two stacked frames: the stack spans (stack_size - 1) x frame_interval steps,
         # so a speed difference moves a car frame_interval times as many pixels between its frames.
         self.frame_interval = _int_arg("frame_interval", frame_interval, 1, 30)
+        # The ego's place across the frame's width (world x; 0.5 centred, highway-env's 0.3 shows more ahead).
+        self.frame_centering = _float_arg("frame_centering", frame_centering, 0.0, 1.0, lo_open=True, hi_open=True)
         self.vehicles_observed = _int_arg("vehicles_observed", vehicles_observed, 0)
         if not isinstance(lane_features, (bool, np.bool_)):
             raise ValueError(f"lane_features must be True or False, got {lane_features!r}")
@@ -426,7 +431,7 @@ class LaneChangeEnv(LaneQueries, Driving, PolicyVehicles, gym.Env):
             return self._vector_obs(self.ego)
         if self._obs_renderer is None:
             self._obs_renderer = TopDownRenderer(self.layout, self.observation_shape, self.scaling, grayscale=True,
-                                                 supersample=self.frame_supersample)
+                                                 supersample=self.frame_supersample, centering=self.frame_centering)
         frame = self._draw(self._obs_renderer)
         if self._frames is None:  # first frame of an episode fills the whole history
             self._frames = np.repeat(frame[None], (self.stack_size - 1) * self.frame_interval + 1, axis=0)

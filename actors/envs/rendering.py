@@ -7,8 +7,9 @@ renderer does not go through it.)  Lane surfaces are polygons sampled from the l
 (which are exactly highway-env's `StraightLane` / `CircularLane` sections, see geometry.py),
 vehicles are their rotated rectangles.  Only what falls inside the view is drawn.
 
-Image orientation: world x to the right (columns), world y downwards (rows), the view centred on
-the ego vehicle and not rotated with it; on the straight road the traffic drives to the right.
+Image orientation: world x to the right (columns), world y downwards (rows), the view around the
+ego vehicle (centred, or at ``centering`` across the width) and not rotated with it; on the straight
+road the traffic drives to the right.
 
 The palette makes the paper's figure-3 regions distinguishable in grayscale:
 off-road (forbidden region) black, non-target lanes dark grey, the target lane light grey, lane
@@ -70,12 +71,18 @@ class TopDownRenderer:
     inside its pixel the edge lies. Without it pygame's polygons cover whole pixels, so a car
     moves in the frame only when it crosses a pixel boundary: at 2 px/m a 1 m/s speed gap is 0.2 px
     per frame, invisible across a 4-frame stack (docs/RESULTS.md, how the pixel network crashes).
+
+    ``centering`` is where the centre given to :meth:`render` (the ego) lies across the window's
+    width, as a fraction from its left (low x) edge: 0.5 centres it; highway-env's observations use
+    0.3, which shows 70 % of the window ahead of a car driving towards +x.
     """
 
     def __init__(self, layout: Layout, size: tuple[int, int], scaling: float, grayscale: bool,
-                 supersample: int = 1) -> None:
+                 supersample: int = 1, centering: float = 0.5) -> None:
         if int(supersample) != supersample or supersample < 1:
             raise ValueError(f"supersample must be an integer >= 1, got {supersample!r}")
+        if not 0.0 < centering < 1.0:
+            raise ValueError(f"centering must be in (0, 1), got {centering!r}")
         self.layout = layout
         self.supersample = k = int(supersample)
         self.out_height, self.out_width = int(size[0]), int(size[1])
@@ -83,6 +90,8 @@ class TopDownRenderer:
         self.height, self.width = self.out_height * k, self.out_width * k
         self.scaling = float(scaling) * k
         self.grayscale = grayscale
+        # Metres from the given centre to the window's centre along x (0 when centred).
+        self.shift_x = (0.5 - float(centering)) * self.width / self.scaling
         palette = GRAY_PALETTE if grayscale else RGB_PALETTE
         self.colors = {k: ((v, v, v) if isinstance(v, int) else v) for k, v in palette.items()}
         self.surface = pygame.Surface((self.width, self.height))
@@ -98,11 +107,13 @@ class TopDownRenderer:
         length: float,
         width: float,
     ) -> np.ndarray:
-        """Draw the view centred on ``center``; ``vehicles`` are (x, y, heading, palette key) arrays.
+        """Draw the view around ``center`` (at ``centering`` across the width); ``vehicles`` are
+        (x, y, heading, palette key) arrays.
 
         Returns (H, W) uint8 for grayscale, (H, W, 3) uint8 otherwise."""
         surf = self.surface
         surf.fill(self.colors["offroad"])
+        center = (center[0] + self.shift_x, center[1])  # the window's centre from here on
         ox = center[0] - self.width / 2 / self.scaling
         oy = center[1] - self.height / 2 / self.scaling
         lanes = []

@@ -29,7 +29,8 @@ from .wire import TransitionSchema
 #: shield and its figures, which change what an action does. A learner checkpoint's metadata carries
 #: those the run set, so an evaluation can build the same env.
 RECORDED_ENV_OPTIONS = ("lane_features", "alongside_features", "gap_features", "shield", "shield_gap",
-                        "shield_decel", "frame_supersample", "frame_interval")
+                        "shield_decel", "frame_supersample", "frame_interval",
+                        "frame_centering")
 
 #: Scenario name -> gymnasium id (registered by importing ``laneshift.actors.envs``).
 SCENARIOS: dict[str, str] = {

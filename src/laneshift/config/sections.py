@@ -41,6 +41,10 @@ class EnvConfig:
     # at t, t-k, t-2k, t-3k, so a speed difference moves a car k times as many pixels between them).
     # Recorded in checkpoints.
     frame_interval: int = 1
+    # grayscale only: the ego's place across the frame's width, a fraction from its left edge (world x,
+    # the straight road's driving direction): 0.5 centres it; highway-env's observations use 0.3 (70 %
+    # of the view ahead). Recorded in checkpoints.
+    frame_centering: float = 0.5
     reward_preset: int = 5  # Table 1 condition (lane-change scenarios only)
     max_steps: int = 0  # 0 = the scenario's default episode length (allroads: 300 on every road)
     initial_lane: Literal["random", "non-target"] = "random"  # random | non-target
@@ -93,6 +97,9 @@ class EnvConfig:
                self.frame_interval)
         _check(self.frame_interval == 1 or self.observation == "grayscale", "env.frame_interval",
                "spaces the stacked grayscale frames: it needs env.observation=grayscale", self.frame_interval)
+        _check(0.0 < self.frame_centering < 1.0, "env.frame_centering", "must be in (0, 1)", self.frame_centering)
+        _check(self.frame_centering == 0.5 or self.observation == "grayscale", "env.frame_centering",
+               "places the ego in the grayscale frames: it needs env.observation=grayscale", self.frame_centering)
         _check(self.shield_gap > 0, "env.shield_gap", "must be > 0 m", self.shield_gap)
         _check(0 < self.shield_decel <= 1.0, "env.shield_decel",
                "must be in (0, 1] m/s^2 (the paper actions change the speed by at most 1 m/s^2)", self.shield_decel)
@@ -137,6 +144,8 @@ class EnvConfig:
             kw["frame_supersample"] = self.frame_supersample
         if self.frame_interval != 1:
             kw["frame_interval"] = self.frame_interval
+        if self.frame_centering != 0.5:
+            kw["frame_centering"] = self.frame_centering
         if self.road:
             kw["road"] = self.road
         return kw

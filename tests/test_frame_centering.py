@@ -1,0 +1,80 @@
+"""env.frame_centering: where the ego sits across the grayscale frame's width (0.5 centred;
+highway-env's observations use 0.3, more of the road ahead in view). The frame keeps its shape, the
+ego is drawn where asked, a car 35 m ahead comes into view only off-centre, the option is validated,
+travels from the run config to the env, names its own demo shard and is recorded in a checkpoint's
+metadata for evaluation.
+
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
+the code under test needs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from laneshift.actors.envs import make_env
+from laneshift.actors.envs.rendering import GRAY_PALETTE, TopDownRenderer
+from laneshift.config import ConfigError, EnvConfig
+
+
+def _frame(centering: float, car_x: float) -> np.ndarray:
+    """The straight road's view around an ego at (100, lane 1) with one car car_x metres ahead of it."""
+    env = make_env("straight", observation="grayscale").unwrapped
+    renderer = TopDownRenderer(env.layout, (100, 100), 2.0, grayscale=True, centering=centering)
+    y = float(env.layout.paths[1].position(np.array([100.0]), 0.0)[1][0])  # the middle lane's centre line
+    ego = (np.array([100.0]), np.array([y]), np.array([0.0]), "ego")
+    npc = (np.array([100.0 + car_x]), np.array([y]), np.array([0.0]), "npc")
+    return renderer.render((100.0, y), 2, [npc, ego], 5.0, 2.0)
+
+
+def _columns(frame: np.ndarray, key: str) -> np.ndarray:
+    return np.flatnonzero((frame == GRAY_PALETTE[key]).any(axis=0))
+
+
+@pytest.mark.parametrize("centering", [0.5, 0.3, 0.2])
+def test_the_ego_is_drawn_at_its_place_across_the_width(centering):
+    frame = _frame(centering, 35.0)
+    assert frame.shape == (100, 100) and frame.dtype == np.uint8
+    ego = _columns(frame, "ego")
+    assert abs(float(ego.mean()) - 100 * centering) <= 1.0  # 5 m long at 2 px/m: 10 columns around its place
+
+
+def test_a_car_35_m_ahead_is_in_view_only_off_centre():
+    # Centred, the view reaches 25 m ahead; at 0.3 it reaches 35 m, so the car's rear (32.5 m) shows.
+    assert _columns(_frame(0.5, 35.0), "npc").size == 0
+    assert _columns(_frame(0.3, 35.0), "npc").size > 0
+
+
+def test_the_env_draws_off_centre_frames_and_refuses_a_bad_place():
+    env = make_env("straight", observation="grayscale", frame_centering=0.3)
+    obs, _ = env.reset(seed=0)
+    assert obs.shape == (4, 100, 100)
+    assert abs(float(np.flatnonzero((obs[-1] == GRAY_PALETTE["ego"]).any(axis=0)).mean()) - 30) <= 1.5
+    for bad in (0.0, 1.0, -0.2):
+        with pytest.raises(ValueError, match="frame_centering"):
+            make_env("straight", observation="grayscale", frame_centering=bad)
+    with pytest.raises(ValueError, match="centering"):
+        TopDownRenderer(env.unwrapped.layout, (100, 100), 2.0, grayscale=True, centering=1.5)
+
+
+def test_the_run_config_validates_it_passes_it_on_names_the_shard_and_records_it():
+    from laneshift.actors.evaluation import checkpoint_env_settings
+    from laneshift.config import load_run_config
+    from laneshift.deploy.run_dir import default_demo_dir
+    from laneshift.envspec import RECORDED_ENV_OPTIONS
+
+    with pytest.raises(ConfigError, match="env.frame_centering"):
+        EnvConfig(observation="grayscale", frame_centering=1.0)
+    with pytest.raises(ConfigError, match="needs env.observation=grayscale"):
+        EnvConfig(frame_centering=0.3)
+    cfg = load_run_config(overrides={"env.observation": "grayscale", "env.frame_centering": 0.3,
+                                     "train.run_dir": "runs/x"})
+    assert cfg.env.env_kwargs()["frame_centering"] == 0.3
+    assert default_demo_dir(cfg, 40).name.startswith("straight-grayscale4x100x100-c0.3-")
+    plain = cfg.replace(env=EnvConfig(observation="grayscale"))
+    assert "frame_centering" not in plain.env.env_kwargs()
+    assert default_demo_dir(plain, 40).name.startswith("straight-grayscale4x100x100-p")
+    assert "frame_centering" in RECORDED_ENV_OPTIONS
+    settings = checkpoint_env_settings({"obs_shape": "4,100,100", "frame_centering": "0.3"})
+    assert settings == {"observation": "grayscale", "frame_centering": 0.3}
+    assert EnvConfig(**settings).env_kwargs()["frame_centering"] == 0.3
