@@ -1,8 +1,7 @@
 """env.frame_centering: where the ego sits across the grayscale frame's width (0.5 centred;
 highway-env's observations use 0.3, more of the road ahead in view). The frame keeps its shape, the
-ego is drawn where asked, a car 35 m ahead comes into view only off-centre, the option is validated,
-travels from the run config to the env, names its own demo shard and is recorded in a checkpoint's
-metadata for evaluation.
+ego is drawn where asked, a car 35 m ahead comes into view only off-centre, and the env and the
+renderer refuse a bad place (the run config's side: test_frame_options.py).
 
 Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
 the code under test needs."""
@@ -14,7 +13,6 @@ import pytest
 
 from laneshift.actors.envs import make_env
 from laneshift.actors.envs.rendering import GRAY_PALETTE, TopDownRenderer
-from laneshift.config import ConfigError, EnvConfig
 
 
 def _frame(centering: float, car_x: float) -> np.ndarray:
@@ -57,24 +55,3 @@ def test_the_env_draws_off_centre_frames_and_refuses_a_bad_place():
         TopDownRenderer(env.unwrapped.layout, (100, 100), 2.0, grayscale=True, centering=1.5)
 
 
-def test_the_run_config_validates_it_passes_it_on_names_the_shard_and_records_it():
-    from laneshift.actors.evaluation import checkpoint_env_settings
-    from laneshift.config import load_run_config
-    from laneshift.deploy.run_dir import default_demo_dir
-    from laneshift.envspec import RECORDED_ENV_OPTIONS
-
-    with pytest.raises(ConfigError, match="env.frame_centering"):
-        EnvConfig(observation="grayscale", frame_centering=1.0)
-    with pytest.raises(ConfigError, match="needs env.observation=grayscale"):
-        EnvConfig(frame_centering=0.3)
-    cfg = load_run_config(overrides={"env.observation": "grayscale", "env.frame_centering": 0.3,
-                                     "train.run_dir": "runs/x"})
-    assert cfg.env.env_kwargs()["frame_centering"] == 0.3
-    assert default_demo_dir(cfg, 40).name.startswith("straight-grayscale4x100x100-c0.3-")
-    plain = cfg.replace(env=EnvConfig(observation="grayscale"))
-    assert "frame_centering" not in plain.env.env_kwargs()
-    assert default_demo_dir(plain, 40).name.startswith("straight-grayscale4x100x100-p")
-    assert "frame_centering" in RECORDED_ENV_OPTIONS
-    settings = checkpoint_env_settings({"obs_shape": "4,100,100", "frame_centering": "0.3"})
-    assert settings == {"observation": "grayscale", "frame_centering": 0.3}
-    assert EnvConfig(**settings).env_kwargs()["frame_centering"] == 0.3

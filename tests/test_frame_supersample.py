@@ -1,7 +1,7 @@
 """env.frame_supersample: grayscale frames drawn at k times the resolution and block-averaged. The
-frame keeps its shape and greys, a car's sub-pixel move shows in its edge pixels, the option is
-validated, travels from the run config to the env, names its own demo shard and is recorded in a
-checkpoint's metadata for evaluation.
+frame keeps its shape and greys, a car's sub-pixel move shows in its edge pixels, the env refuses
+a bad factor and the downsample is each block's rounded mean (the run config's side:
+test_frame_options.py).
 
 Room: tests, unit. May import: laneshift (any floor), pytest, numpy, the standard library and what
 the code under test needs."""
@@ -13,7 +13,6 @@ import pytest
 
 from laneshift.actors.envs import make_env
 from laneshift.actors.envs.rendering import GRAY_PALETTE, TopDownRenderer
-from laneshift.config import ConfigError, EnvConfig
 
 
 def _frame(supersample: int, car_x: float) -> np.ndarray:
@@ -54,34 +53,6 @@ def test_the_env_draws_supersampled_frames_and_refuses_a_bad_factor():
         make_env("straight", observation="grayscale", frame_supersample=0)
     with pytest.raises(ValueError, match="supersample"):
         TopDownRenderer(env.unwrapped.layout, (100, 100), 2.0, grayscale=True, supersample=1.5)
-
-
-def test_the_run_config_validates_it_passes_it_on_and_names_the_shard_for_it():
-    from laneshift.config import load_run_config
-    from laneshift.deploy.run_dir import default_demo_dir
-
-    with pytest.raises(ConfigError, match="env.frame_supersample"):
-        EnvConfig(observation="vector", frame_supersample=4)
-    with pytest.raises(ConfigError, match="env.frame_supersample"):
-        EnvConfig(observation="grayscale", frame_supersample=9)
-    assert "frame_supersample" not in EnvConfig(observation="grayscale").env_kwargs()
-    assert EnvConfig(observation="grayscale", frame_supersample=4).env_kwargs()["frame_supersample"] == 4
-    cfg = load_run_config(overrides={"env.observation": "grayscale", "env.frame_supersample": 4,
-                                     "train.run_dir": "runs/x"})
-    assert cfg.env.frame_supersample == 4
-    assert default_demo_dir(cfg, 40).name.startswith("straight-grayscale4x100x100-ss4-")
-    plain = cfg.replace(env=EnvConfig(observation="grayscale"))
-    assert default_demo_dir(plain, 40).name.startswith("straight-grayscale4x100x100-p")
-
-
-def test_an_evaluation_rebuilds_the_supersampled_env_from_a_checkpoint():
-    from laneshift.actors.evaluation import checkpoint_env_settings
-    from laneshift.envspec import RECORDED_ENV_OPTIONS
-
-    assert "frame_supersample" in RECORDED_ENV_OPTIONS  # the learner writes it where the run set it
-    settings = checkpoint_env_settings({"obs_shape": "4,100,100", "obs_dtype": "|u1", "frame_supersample": "4"})
-    assert settings == {"observation": "grayscale", "frame_supersample": 4}
-    assert EnvConfig(**settings).env_kwargs()["frame_supersample"] == 4
 
 
 @pytest.mark.parametrize("k", [2, 4, 8])
