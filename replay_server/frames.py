@@ -13,10 +13,11 @@ into one ring of single frames, and a sample gathers its stacks from it.
   sending actor's recent frames (crc32, then compared byte for byte, so a hash collision can
   never return a wrong frame) and stored only if new. Items live while all their frames do:
   when the frame ring wraps, the oldest items go first, which keeps eviction FIFO (see
-  ``_floor``). Steady state is about one new frame per item, so the default frame ring
-  (``replay.frames_per_item`` = 2 frames per item of capacity) holds the whole table; a run
-  that needs more (short episodes, many interleaved actors) evicts early, and the stats say
-  how many items went that way (``evicted_for_frames``).
+  ``frame_floor``). Steady state is about one new frame per item, whatever the n-step length,
+  the number of interleaved actors or the spacing of the stacked frames (``env.frame_interval``),
+  so the default frame ring (``replay.frames_per_item`` = 2 frames per item of capacity) holds
+  the whole table; a run that needs more (short episodes) evicts early, and the stats say how
+  many items went that way (``evicted_for_frames``).
 - ``dedup_stacks``: the same for a fixed set of stacks (the demo table), done once at load.
 
 Room: replay_server (component). May import: numpy, zlib, the contract (laneshift.wire), and .storage.
@@ -33,9 +34,15 @@ from laneshift.wire import TransitionBatch
 
 from .storage import RingTable
 
-#: A sending actor's frames remembered for reuse: its last two items' stacks and a margin (an
-#: n-step item's next observation lies n steps ahead, so it too is usually among them).
-RECENT_FRAMES = 64
+#: A sending actor's frames remembered for reuse. An item's frames span its stack's reach, (S - 1)
+#: x env.frame_interval steps back, and its next observation's, n steps ahead: 2 x (3 x 30 + 10)
+#: frames at the widest settings, so this holds them with room to spare.
+RECENT_FRAMES = 256
+#: A frame is reused only while it lies in the newest 1 / REUSE_WINDOW of the frame ring. Each row
+#: then has a lower bound on its frame keys (``frame_floor``) that never goes down from row to row,
+#: however the actors interleave, so the rows a wrapping ring must drop are always the oldest.
+#: (Inserts go in chunks of at most half the ring, so a reused frame outlives the chunk's writes.)
+REUSE_WINDOW = 4
 
 
 class FrameStore:
@@ -101,9 +108,13 @@ class FrameRingTable(RingTable):
         self.obs, self.next_obs = StackView(self.store, self.obs_key), StackView(self.store, self.next_key)
         self.records = None  # the stacks are not in the records: a sample gathers column by column
         self._tail = 0  # key of the oldest live item
-        # Every stored item's oldest frame key is >= this (the previous item's): the items' oldest
-        # frames rise with their keys, so when the frame ring wraps the items to drop are a prefix.
-        self._floor = 0
+        # Each row's frame keys are all >= its frame_floor, and frame_floor never goes down from an
+        # item to the next (by key), so when the frame ring wraps the items to drop are a prefix.
+        # (A bound by time, not the row's own oldest frame: with two actors interleaved, or frames
+        # spaced k steps apart, a row's oldest frame can be older than the previous row's, and a
+        # floor made of those would forbid reusing it: about 7 frames an item were stored then.)
+        self.frame_floor = np.zeros(self.capacity, np.int64)
+        self._floor = 0  # the newest row's frame_floor
         self._recent: dict[int, collections.OrderedDict[int, int]] = collections.defaultdict(collections.OrderedDict)
         self.evicted_for_frames = 0  # items dropped before the table was full, their frames overwritten
         self.frames_stored = 0  # frames written (the rest of 2 S per item were shared)
@@ -118,8 +129,8 @@ class FrameRingTable(RingTable):
 
     @property
     def nbytes(self) -> int:
-        cols = (self.obs_key, self.next_key, self.action, self.reward, self.terminated, self.truncated, self.steps,
-                self.actor, self.version, self.key, self.seq)
+        cols = (self.obs_key, self.next_key, self.frame_floor, self.action, self.reward, self.terminated,
+                self.truncated, self.steps, self.actor, self.version, self.key, self.seq)
         return sum(a.nbytes for a in cols) + self.store.nbytes
 
     def insert(self, batch: TransitionBatch, actor_index: int) -> np.ndarray:
@@ -137,7 +148,7 @@ class FrameRingTable(RingTable):
         """Frame keys of rows ``begin:end`` (``[rows, 2 S]``: obs, then next_obs) and the new frames."""
         store, stack = self.store, self.obs_key.shape[1]
         recent = self._recent[actor_index]
-        reuse_from = max(self._floor, store.inserted + 2 * stack * (end - begin) - store.capacity)
+        reuse_from = self.reuse_from()
         new_frames: list[np.ndarray] = []
         keys_of = np.empty((end - begin, 2 * stack), np.int64)
         for i in range(end - begin):
@@ -159,20 +170,22 @@ class FrameRingTable(RingTable):
                 if len(recent) > RECENT_FRAMES:
                     recent.popitem(last=False)
                 keys_of[i, j] = k
-            # Rows' oldest frames must not go down (see _floor): later rows reuse nothing older.
-            reuse_from = max(reuse_from, int(keys_of[i].min()))
         return keys_of, new_frames
+
+    def reuse_from(self) -> int:
+        """The oldest frame key the next rows may reuse: their ``frame_floor``."""
+        return max(self._floor, self.store.inserted - self.store.capacity // REUSE_WINDOW)
 
     def _insert_rows(self, batch: TransitionBatch, begin: int, end: int, actor_index: int) -> None:
         store, stack = self.store, self.obs_key.shape[1]
+        floor = self.reuse_from()
         keys_of, new_frames = self._frame_keys(batch, begin, end, actor_index)
         keys = np.arange(self.inserted, self.inserted + end - begin, dtype=np.int64)
-        # Drop the items the table's capacity pushes out, then those whose oldest frame the new
-        # frames overwrite: a prefix of the live items, since their oldest frames rise with their keys.
+        # Drop the items the table's capacity pushes out, then those whose frames the new frames
+        # may overwrite: a prefix of the live items, since their frame floors rise with their keys.
         first_kept_frame = store.inserted + len(new_frames) - store.capacity
         tail = full_tail = max(self._tail, int(keys[-1]) + 1 - self.capacity)
-        while tail < self.inserted and min(self.obs_key[tail % self.capacity].min(),
-                                           self.next_key[tail % self.capacity].min()) < first_kept_frame:
+        while tail < self.inserted and self.frame_floor[tail % self.capacity] < first_kept_frame:
             tail += 1
         self.evicted_for_frames += tail - full_tail
         self._tail = tail
@@ -184,7 +197,7 @@ class FrameRingTable(RingTable):
             self.frames_stored += len(new_frames)
         rows = keys % self.capacity
         self.obs_key[rows], self.next_key[rows] = keys_of[:, :stack], keys_of[:, stack:]
-        self._floor = max(self._floor, int(keys_of.min(axis=1).max()))
+        self.frame_floor[rows] = self._floor = floor
         for name in ("action", "reward", "terminated", "truncated", "steps"):
             getattr(self, name)[rows] = getattr(batch, name)[begin:end]
         self.actor[rows] = actor_index
@@ -194,10 +207,13 @@ class FrameRingTable(RingTable):
         self.inserted += end - begin
 
     def restored(self, n: int) -> None:
-        """Rows 0..n-1 were just written back from a checkpoint: later inserts go on from their
-        newest frames (the oldest frame key of each row never goes down, see ``_floor``)."""
+        """Rows 0..n-1 were just written back from a checkpoint (oldest first): each row's frame
+        floor is the oldest frame of it and of every later row, which never goes down from a row
+        to the next and bounds the row's frames (the checkpoint need not hold the floors)."""
         if n:
-            self._floor = int(np.minimum(self.obs_key[:n].min(axis=1), self.next_key[:n].min(axis=1)).max())
+            oldest = np.minimum(self.obs_key[:n].min(axis=1), self.next_key[:n].min(axis=1))
+            self.frame_floor[:n] = np.minimum.accumulate(oldest[::-1])[::-1]
+            self._floor = int(self.frame_floor[n - 1])
 
     def forget_actor(self, actor_index: int) -> None:
         """An evicted actor's recent frames are not reused by the next actor given its index."""

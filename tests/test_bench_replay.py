@@ -40,8 +40,9 @@ def test_bench_replay_json_end_to_end(capsys) -> None:
     assert out["grayscale_obs"] == {"shape": [4, 100, 100], "dtype": "|u1"}
     # Bytes per stored transition: at least the two observations, plus a few fixed columns.
     assert 2 * 82 * 4 < out["bytes_per_transition_vector"] < 2 * 82 * 4 + 64
-    # Grayscale: frames held once each (replay_server/frames.py), 2 frames of 10,000 B per item of capacity.
-    assert 2 * 10_000 < out["bytes_per_transition_grayscale"] < 2 * 10_000 + 2 * 8 * 4 + 64
+    # Grayscale: frames held once each (replay_server/frames.py), 2 frames of 10,000 B per item of capacity,
+    # 2 x 4 frame keys and a frame floor of 8 B each.
+    assert 2 * 10_000 < out["bytes_per_transition_grayscale"] < 2 * 10_000 + (2 * 4 + 1) * 8 + 64
     assert [row["actors"] for row in out["actor_scaling"]] == [2]
     for run in (out["ingest_vector"], out["ingest_grayscale"], *out["actor_scaling"],
                 out["fill_vector"], out["fill_grayscale"]):

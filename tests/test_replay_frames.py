@@ -2,10 +2,11 @@
 whole stacks, the paper's 4 x 100 x 100 observations would keep every frame 8 times (obs, next_obs).
 
 Each actor drives synthetic episodes whose frames are random images; its observations are the
-shifting 4-frame stacks a frame-stacking env makes (reset: the first frame 4 times), sent as
-n-step items in batches, two actors interleaved. Every sampled item must be exactly the stacks
-that were sent for its key, whatever the frame ring's size (a too small ring drops the oldest
-items early, counted, and never returns a wrong frame), through checkpoints and in the demo table.
+shifting 4-frame stacks a frame-stacking env makes (reset: the first frame repeated; with
+``env.frame_interval`` k, frames k steps apart), sent as n-step items in batches, two actors
+interleaved. Every sampled item must be exactly the stacks that were sent for its key, whatever
+the frame ring's size (a too small ring drops the oldest items early, counted, and never returns
+a wrong frame), through checkpoints and in the demo table; about one frame an item is stored.
 Room: tests, unit. May import: numpy, pytest, laneshift (wire, config, replay_server).
 """
 
@@ -26,24 +27,27 @@ STACK, SIDE = 4, 12
 SCHEMA = TransitionSchema(obs_shape=(STACK, SIDE, SIDE), obs_dtype="uint8", n_actions=9)
 
 
-def episode_items(rng: np.random.Generator, steps: int, n_step: int) -> tuple[np.ndarray, np.ndarray]:
+def episode_items(rng: np.random.Generator, steps: int, n_step: int,
+                  interval: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """One episode's (obs, next_obs) stacks of n-step items: ``[steps, S, H, W]`` each."""
     frames = rng.integers(0, 256, size=(steps + 1, SIDE, SIDE), dtype=np.uint8)
-    padded = np.concatenate([np.repeat(frames[:1], STACK - 1, axis=0), frames])  # reset: first frame repeated
-    stacks = np.stack([padded[t:t + STACK] for t in range(steps + 1)])
+    reach = (STACK - 1) * interval  # steps from a stack's oldest frame to its newest
+    padded = np.concatenate([np.repeat(frames[:1], reach, axis=0), frames])  # reset: first frame repeated
+    stacks = np.stack([padded[t:t + reach + 1:interval] for t in range(steps + 1)])
     nxt = np.minimum(np.arange(steps) + n_step, steps)  # n steps ahead, cut at the episode's end
     return stacks[:steps], stacks[nxt]
 
 
 class Actor:
-    def __init__(self, name: str, seed: int, n_step: int):
+    def __init__(self, name: str, seed: int, n_step: int, interval: int = 1, episode_steps: tuple = (5, 40)):
         self.name, self.rng, self.n_step, self.seq, self.steps = name, np.random.default_rng(seed), n_step, 0, 0
+        self.interval, self.episode_steps = interval, episode_steps
         self.obs = np.zeros((0, STACK, SIDE, SIDE), np.uint8)
         self.next_obs = self.obs.copy()
 
     def batch(self, rows: int) -> bytes:
         while len(self.obs) < rows:
-            o, n = episode_items(self.rng, int(self.rng.integers(5, 40)), self.n_step)
+            o, n = episode_items(self.rng, int(self.rng.integers(*self.episode_steps)), self.n_step, self.interval)
             self.obs, self.next_obs = np.concatenate([self.obs, o]), np.concatenate([self.next_obs, n])
         obs, nxt = self.obs[:rows], self.next_obs[:rows]
         self.obs, self.next_obs = self.obs[rows:], self.next_obs[rows:]
@@ -57,9 +61,9 @@ class Actor:
 
 
 def run(core: ReplayCore, batches: int, rows: int = 25, n_step: int = 1,
-        names: tuple[str, str] = ("w0", "w1")) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+        names: tuple[str, str] = ("w0", "w1"), **episodes) -> dict[int, tuple[np.ndarray, np.ndarray]]:
     """Two interleaved actors (each numbering its batches from seq 0); returns what was sent, by item key."""
-    actors = [Actor(names[0], 1, n_step), Actor(names[1], 2, n_step)]
+    actors = [Actor(names[0], 1, n_step, **episodes), Actor(names[1], 2, n_step, **episodes)]
     sent: dict[int, tuple[np.ndarray, np.ndarray]] = {}
     for b in range(batches):
         msg, obs, nxt = actors[b % 2].batch(rows)
@@ -96,6 +100,20 @@ def test_sampled_stacks_are_the_sent_ones_with_about_one_new_frame_an_item(n_ste
     assert frames["evicted_for_frames"] == 0 and core.online.size == 400
     stacks_bytes = 2 * 400 * STACK * SIDE * SIDE
     assert core.online.store.frames.nbytes <= stacks_bytes / 4 + 1  # 2 frames an item vs 8
+
+
+@pytest.mark.parametrize("interval", [1, 4])
+def test_long_episodes_store_one_frame_an_item_whatever_the_spacing_and_the_interleave(interval):
+    # The pixel runs' shape: n = 10, two actors, 32-row batches, episodes of 150-300 steps. Frames
+    # k steps apart share nothing with the previous step's stack, and each actor's rows reuse frames
+    # older than the other actor's last rows: a floor made of each row's oldest frame forbade
+    # that, and 6.7 frames an item were stored with k = 4 (a 140,000-item table held 43,000).
+    core = make_core(capacity=2_000)
+    sent = run(core, batches=200, rows=32, n_step=10, interval=interval, episode_steps=(150, 300))
+    check_samples(core, sent)
+    frames = core.stats()["tables"]["online"]["frames"]
+    assert frames["per_item"] < 1.05 and frames["evicted_for_frames"] == 0, frames
+    assert core.online.size == 2_000
 
 
 def test_a_small_frame_ring_drops_the_oldest_items_early_and_counts_them():
