@@ -237,8 +237,9 @@ class ReplayConfig:
     # idle this long, else it is refused (counted as too_many_actors).
     actor_idle_evict_s: float = 600.0
     # Stacked image observations are held once per frame (replay_server/frames.py): a ring of this
-    # many frames per item of capacity. About 1 new frame an item in steady state; when the ring
-    # runs out first, the oldest items go early (stats: online.frames.evicted_for_frames).
+    # many frames per item of capacity. About 1 new frame an item in steady state, and an item lives
+    # for 3/4 of the ring's turn, so 2 holds the whole table; when the ring runs out first, the
+    # oldest items go early (stats: online.frames.evicted_for_frames).
     frames_per_item: float = 2.0
     # Replay-server shards, to scale the replay out: each holds capacity / shards items (and its own
     # demo region in retention), each env worker sends to one (wire.shard_of: a stable function of
