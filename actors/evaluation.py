@@ -234,6 +234,8 @@ def checkpoint_env_settings(meta: Mapping[str, str]) -> dict[str, str | bool | f
     {'observation': 'grayscale', 'frame_interval': 3}
     >>> checkpoint_env_settings({"obs_shape": "4,100,100", "frame_centering": "0.3"})
     {'observation': 'grayscale', 'frame_centering': 0.3}
+    >>> checkpoint_env_settings({"obs_shape": "4,100,100", "frame_scale": "1"})
+    {'observation': 'grayscale', 'frame_scale': 1.0}
     """
     out: dict[str, str | bool | float] = {}
     dims = [d for d in str(meta.get("obs_shape", "")).split(",") if d.strip()]

@@ -138,6 +138,8 @@ def default_demo_dir(cfg: RunConfig, episodes: int) -> Path:
         shape += f"-fi{env.frame_interval}"
     if env.frame_centering != 0.5:  # the ego elsewhere in the frame: another shard
         shape += f"-c{env.frame_centering:g}"
+    if env.frame_scale != 2.0:  # another scale: another shard
+        shape += f"-px{env.frame_scale:g}"
     scenario = env.scenario.replace('/', '_') + (f"-{env.road}" if env.road else "")  # allroads pinned to one road
     shield = "-shield" if env.shield else ""  # the driver drove behind the shield
     name = f"{scenario}-{env.observation}{shape}-p{env.reward_preset}{shield}-scripted-v{ScriptedDriver.VERSION}-{episodes}ep"

@@ -277,7 +277,7 @@ def build_core(cfg: RunConfig, spec: EnvSpec, shard: int = 0) -> ReplayCore:
 ENV_FIELDS_ADDED_LATER: dict[str, object] = {"alongside_features": False, "gap_features": False, "shield": False,
                                              "shield_gap": SHIELD_GAP, "shield_decel": SHIELD_DECEL,
                                              "frame_supersample": 1, "frame_interval": 1,
-                                             "frame_centering": 0.5}
+                                             "frame_centering": 0.5, "frame_scale": 2.0}
 
 
 def config_digest(cfg: RunConfig, shard: int = 0) -> str:

@@ -1,9 +1,9 @@
 """The grayscale frame options of the run config (env.frame_supersample, env.frame_interval,
-env.frame_centering), each the same way: validated (a bad value and a vector run refused with the
+env.frame_centering, env.frame_scale), each the same way: validated (a bad value and a vector run refused with the
 option's name), passed to the env only when set, its own demo shard name (the frames differ, so the
 demonstrations do), and recorded in a checkpoint so that an evaluation rebuilds the same env.
 What each option draws is tested beside its code's other tests (test_frame_supersample.py,
-test_frame_interval.py, test_frame_centering.py).
+test_frame_interval.py, test_frame_centering.py, test_frame_scale.py).
 
 Room: tests, unit. May import: laneshift (any floor), pytest, the standard library and what the code
 under test needs."""
@@ -22,6 +22,7 @@ OPTIONS = [
     ("frame_supersample", 4, 9, "-ss4-", 1),
     ("frame_interval", 3, 31, "-fi3-", 1),
     ("frame_centering", 0.3, 1.0, "-c0.3-", 0.5),
+    ("frame_scale", 1.0, 9.0, "-px1-", 2.0),
 ]
 
 

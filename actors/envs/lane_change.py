@@ -95,7 +95,7 @@ class LaneChangeEnv(LaneQueries, Driving, PolicyVehicles, gym.Env):
         policy_vehicles: int = 0,
         observation_shape: Sequence[int] = (100, 100),
         stack_size: int = 4,
-        scaling: float = 2.0,
+        frame_scale: float = 2.0,
         frame_supersample: int = 1,
         frame_interval: int = 1,
         frame_centering: float = 0.5,
@@ -157,7 +157,7 @@ class LaneChangeEnv(LaneQueries, Driving, PolicyVehicles, gym.Env):
             raise ValueError(f"observation_shape must be two ints >= 8 (height, width), got {observation_shape!r}")
         self.observation_shape = (int(shape[0]), int(shape[1]))
         self.stack_size = _int_arg("stack_size", stack_size, 1)
-        self.scaling = _float_arg("scaling", scaling, 0.0, lo_open=True)
+        self.frame_scale = _float_arg("frame_scale", frame_scale, 0.5, 8.0)  # pixels per metre
         # Grayscale frames drawn at k x the resolution and block-averaged (anti-aliased; rendering.py).
         self.frame_supersample = _int_arg("frame_supersample", frame_supersample, 1, 8)
         # Policy steps between two stacked frames: the stack spans (stack_size - 1) x frame_interval steps,
@@ -430,7 +430,7 @@ class LaneChangeEnv(LaneQueries, Driving, PolicyVehicles, gym.Env):
         if self.observation_type == "vector":
             return self._vector_obs(self.ego)
         if self._obs_renderer is None:
-            self._obs_renderer = TopDownRenderer(self.layout, self.observation_shape, self.scaling, grayscale=True,
+            self._obs_renderer = TopDownRenderer(self.layout, self.observation_shape, self.frame_scale, grayscale=True,
                                                  supersample=self.frame_supersample, centering=self.frame_centering)
         frame = self._draw(self._obs_renderer)
         if self._frames is None:  # first frame of an episode fills the whole history

@@ -30,7 +30,7 @@ from .wire import TransitionSchema
 #: those the run set, so an evaluation can build the same env.
 RECORDED_ENV_OPTIONS = ("lane_features", "alongside_features", "gap_features", "shield", "shield_gap",
                         "shield_decel", "frame_supersample", "frame_interval",
-                        "frame_centering")
+                        "frame_centering", "frame_scale")
 
 #: Scenario name -> gymnasium id (registered by importing ``laneshift.actors.envs``).
 SCENARIOS: dict[str, str] = {

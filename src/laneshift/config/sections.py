@@ -45,6 +45,10 @@ class EnvConfig:
     # the straight road's driving direction): 0.5 centres it; highway-env's observations use 0.3 (70 %
     # of the view ahead). Recorded in checkpoints.
     frame_centering: float = 0.5
+    # grayscale only: pixels per metre (2: the 100 x 100 frame shows 50 m of road, 25 m ahead of a
+    # centred ego; 1: 100 m, cars 5 x 2 px). The paper gives the crop's size, not its scale.
+    # Recorded in checkpoints.
+    frame_scale: float = 2.0
     reward_preset: int = 5  # Table 1 condition (lane-change scenarios only)
     max_steps: int = 0  # 0 = the scenario's default episode length (allroads: 300 on every road)
     initial_lane: Literal["random", "non-target"] = "random"  # random | non-target
@@ -100,6 +104,10 @@ class EnvConfig:
         _check(0.0 < self.frame_centering < 1.0, "env.frame_centering", "must be in (0, 1)", self.frame_centering)
         _check(self.frame_centering == 0.5 or self.observation == "grayscale", "env.frame_centering",
                "places the ego in the grayscale frames: it needs env.observation=grayscale", self.frame_centering)
+        _check(0.5 <= self.frame_scale <= 8.0, "env.frame_scale", "must be in [0.5, 8] pixels per metre",
+               self.frame_scale)
+        _check(self.frame_scale == 2.0 or self.observation == "grayscale", "env.frame_scale",
+               "scales the grayscale frames: it needs env.observation=grayscale", self.frame_scale)
         _check(self.shield_gap > 0, "env.shield_gap", "must be > 0 m", self.shield_gap)
         _check(0 < self.shield_decel <= 1.0, "env.shield_decel",
                "must be in (0, 1] m/s^2 (the paper actions change the speed by at most 1 m/s^2)", self.shield_decel)
@@ -146,6 +154,8 @@ class EnvConfig:
             kw["frame_interval"] = self.frame_interval
         if self.frame_centering != 0.5:
             kw["frame_centering"] = self.frame_centering
+        if self.frame_scale != 2.0:
+            kw["frame_scale"] = self.frame_scale
         if self.road:
             kw["road"] = self.road
         return kw
