@@ -153,7 +153,7 @@ class Builder:
         return EnvWorker(self.workers[index], index, cfg.env, cfg.actor, cfg.learner.hidden,
                          sync=cfg.train.parallel == "sync", rehearsal=cfg.replay.pretrains,
                          n_step=cfg.learner.n_step, gamma=cfg.learner.gamma, dueling=cfg.learner.dueling,
-                         cnn=cfg.learner.cnn, heads=cfg.learner.heads)
+                         cnn=cfg.learner.network_cnn, heads=cfg.learner.heads)
 
     def actor_links(self, session: zenoh.Session, name: str) -> ZenohActorLinks:
         from laneshift.actors.links import ZenohActorLinks

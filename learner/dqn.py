@@ -148,7 +148,7 @@ class DoubleDQN:
         torch.manual_seed(cfg.seed)
         self.cfg = cfg
         self.device = resolve_device(cfg.device)
-        self.online = build_q_network(obs_shape, n_actions, cfg.hidden, cfg.dueling, cfg.cnn,
+        self.online = build_q_network(obs_shape, n_actions, cfg.hidden, cfg.dueling, cfg.network_cnn,
                                       cfg.cnn_precision, cfg.heads, cfg.mlp_precision).to(self.device)
         self.target = copy.deepcopy(self.online).requires_grad_(False)
         self._params = list(self.online.parameters())

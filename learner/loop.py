@@ -81,7 +81,7 @@ class Learner:
         t = cfg.train
         # ``evaluate`` plays the env on the validation episodes (train.validation_seed; bound by the builder).
         self.evaluator = GreedyEval(evaluate, t.eval_interval, spec.schema.obs_shape, spec.schema.n_actions,
-                                    cfg.learner.hidden, cfg.learner.dueling, cfg.learner.cnn,
+                                    cfg.learner.hidden, cfg.learner.dueling, cfg.learner.network_cnn,
                                     cfg.learner.heads) if t.eval_interval and evaluate is not None else None
         self.last_eval: dict | None = None
         self.last_update: Mapping[str, float] = {}  # the last update's metrics (dqn.UpdateMetrics: read lazily)
@@ -189,7 +189,8 @@ class Learner:
         meta = {"version": self.version, "updates": self.agent.updates, "phase": self.phase,
                 "env_id": self.spec.env_id, "obs_shape": ",".join(map(str, self.spec.schema.obs_shape)),
                 "obs_dtype": self.spec.schema.obs_dtype, "n_actions": self.spec.schema.n_actions,
-                "hidden": ",".join(map(str, self.lcfg.hidden)), "dueling": int(self.lcfg.dueling), "cnn": self.lcfg.cnn,
+                "hidden": ",".join(map(str, self.lcfg.hidden)), "dueling": int(self.lcfg.dueling),
+                "cnn": self.lcfg.network_cnn,
                 "heads": self.lcfg.heads,
                 "env_steps": self.episodes.env_steps, "elapsed_s": round(time.monotonic() - self.started, 1)}
         # The observation layout's options and the shield where the run set them, so `laneshift eval`

@@ -38,8 +38,13 @@ def test_bench_learner_json_shape(capsys) -> None:
                     "small-b32": ("SmallCNN", [4, 100, 100], "uint8", 32),
                     "small-b64": ("SmallCNN", [4, 100, 100], "uint8", 64),
                     "small-b32-bf16": ("SmallCNN", [4, 100, 100], "uint8", 32),
+                    "small-b32-bf16-rows": ("SmallCNN", [4, 100, 100], "uint8", 32),
                     "small-b128": ("SmallCNN", [4, 100, 100], "uint8", 128),
                     "small-b128-bf16": ("SmallCNN", [4, 100, 100], "uint8", 128)}
+    rows = {c["name"]: c["rows"] for c in out["cases"]}  # learner.cnn_rows: the straight road's band
+    assert rows["small-b32-bf16-rows"] == "22:78" and rows["small-b32-bf16"] == ""
+    params = {c["name"]: c["params"] for c in out["cases"]}
+    assert params["small-b32-bf16-rows"] < params["small-b32-bf16"] / 2
     hidden = {c["name"]: c["hidden"] for c in out["cases"]}
     assert hidden["mlp-b256"] == [256, 256] and hidden["mlp512-b256"] == [512, 512]
     for case in out["cases"]:

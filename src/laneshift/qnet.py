@@ -40,6 +40,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from laneshift import wire
+from laneshift.config.checks import row_window
 from laneshift.wire import tensors_digest  # noqa: F401 - re-exported: a checkpoint's identity
 
 class DuelingHead(nn.Module):
@@ -114,13 +115,22 @@ class _FrameQNetwork(nn.Module):
     of ``units`` and the head. Subclasses give the convolutions."""
 
     def __init__(self, features: nn.Sequential, in_shape: tuple[int, int, int], units: int, n_actions: int,
-                 dueling: bool):
+                 dueling: bool, rows: tuple[int, int] | None = None):
         super().__init__()
         if not isinstance(features[0], nn.Conv2d):
             raise TypeError("the features must start with a Conv2d (forward folds the 1/255 scale into it)")
         self.features = features
-        with torch.no_grad():
-            flat = self.features(torch.zeros(1, *in_shape)).shape[1]
+        # The frames' rows the convolutions see (learner.cnn_rows; None: all): a slice, so the
+        # rows outside cost neither the cast nor the convolutions.
+        self.rows = rows
+        if rows is not None:
+            in_shape = (in_shape[0], rows[1] - rows[0], in_shape[2])
+        try:
+            with torch.no_grad():
+                flat = self.features(torch.zeros(1, *in_shape)).shape[1]
+        except RuntimeError:  # a kernel larger than the (windowed) frame
+            raise ValueError(f"{type(self).__name__}: frames of {in_shape[1]} x {in_shape[2]} are too small for its "
+                             "convolutions") from None
         self.head = nn.Sequential(nn.Linear(flat, units), nn.ReLU(), _head(units, n_actions, dueling))
         # The convolutions' compute dtype (``build_q_network``'s conv_precision): None runs them in
         # float32; bfloat16 runs them under autocast. The parameters stay float32 either way (the
@@ -141,6 +151,8 @@ class _FrameQNetwork(nn.Module):
         1.22x (bf16) as fast (docs/results/pixels-gpu/fold_ab.py, A B A B). Not on CUDA: there the fold
         made the update 0.83-0.92x in float32 on an H100 (docs/results/pixels-gpu/fold_ab-h100.jsonl).
         """
+        if self.rows is not None:
+            obs = obs[:, :, self.rows[0]:self.rows[1]]
         autocast = (contextlib.nullcontext() if self.conv_dtype is None
                     else torch.autocast(obs.device.type, dtype=self.conv_dtype))
         if not fold:
@@ -157,11 +169,12 @@ class _FrameQNetwork(nn.Module):
 class NatureCNN(_FrameQNetwork):
     """Mnih et al. 2015."""
 
-    def __init__(self, in_shape: tuple[int, int, int], n_actions: int, dueling: bool = False):
+    def __init__(self, in_shape: tuple[int, int, int], n_actions: int, dueling: bool = False,
+                 rows: tuple[int, int] | None = None):
         super().__init__(nn.Sequential(
             nn.Conv2d(in_shape[0], 32, 8, stride=4), nn.ReLU(),
             nn.Conv2d(32, 64, 4, stride=2), nn.ReLU(),
-            nn.Conv2d(64, 64, 3, stride=1), nn.ReLU(), nn.Flatten()), in_shape, 512, n_actions, dueling)
+            nn.Conv2d(64, 64, 3, stride=1), nn.ReLU(), nn.Flatten()), in_shape, 512, n_actions, dueling, rows)
 
 
 class SmallCNN(_FrameQNetwork):
@@ -170,10 +183,11 @@ class SmallCNN(_FrameQNetwork):
     3x as fast as NatureCNN on 4 x 100 x 100 frames (`laneshift bench learner`, cases small-b32 and
     small-b64), which is what makes hours-long pixel runs possible without a GPU."""
 
-    def __init__(self, in_shape: tuple[int, int, int], n_actions: int, dueling: bool = False):
+    def __init__(self, in_shape: tuple[int, int, int], n_actions: int, dueling: bool = False,
+                 rows: tuple[int, int] | None = None):
         super().__init__(nn.Sequential(
             nn.Conv2d(in_shape[0], 16, 8, stride=4), nn.ReLU(),
-            nn.Conv2d(16, 32, 4, stride=2), nn.ReLU(), nn.Flatten()), in_shape, 256, n_actions, dueling)
+            nn.Conv2d(16, 32, 4, stride=2), nn.ReLU(), nn.Flatten()), in_shape, 256, n_actions, dueling, rows)
 
 
 CNNS = {"nature": NatureCNN, "small": SmallCNN}
@@ -188,6 +202,21 @@ def _compute_dtype(precision: str, what: str) -> torch.dtype | None:
     if precision not in COMPUTE_DTYPES:
         raise ValueError(f"no {what} precision {precision!r} (one of {', '.join(COMPUTE_DTYPES)})")
     return COMPUTE_DTYPES[precision]
+
+
+def _cnn_spec(cnn: str, obs_shape: tuple[int, ...]) -> tuple[str, tuple[int, int] | None]:
+    """``"small"`` or ``"small[26:74]"`` (learner.network_cnn) -> the CNN's name and its row window,
+    checked against the frames' height."""
+    name, _, window = cnn.partition("[")
+    if name not in CNNS:
+        raise ValueError(f"no CNN {name!r} (one of {', '.join(CNNS)})")
+    if not window:
+        return name, None
+    rows = row_window(window.rstrip("]")) if window.endswith("]") else None
+    if rows is None or rows[1] > obs_shape[1]:
+        raise ValueError(f"CNN {cnn!r}: the rows must be [FIRST:END] with 0 <= FIRST < END <= {obs_shape[1]} "
+                         "(the frames' height)")
+    return name, rows
 
 
 def build_q_network(obs_shape: tuple[int, ...], n_actions: int, hidden: tuple[int, ...] = (256, 256),
@@ -205,10 +234,9 @@ def build_q_network(obs_shape: tuple[int, ...], n_actions: int, hidden: tuple[in
     if heads != 1:
         raise ValueError(f"heads: one Q head per road needs a vector observation (its one-hot), got {obs_shape}")
     if len(obs_shape) == 3:
-        if cnn not in CNNS:
-            raise ValueError(f"no CNN {cnn!r} (one of {', '.join(CNNS)})")
+        name, rows = _cnn_spec(cnn, obs_shape)
         conv_dtype = _compute_dtype(conv_precision, "conv")
-        net = CNNS[cnn](tuple(obs_shape), n_actions, dueling)  # type: ignore[arg-type]
+        net = CNNS[name](tuple(obs_shape), n_actions, dueling, rows)  # type: ignore[arg-type]
         net.conv_dtype = conv_dtype
         return net
     raise ValueError(f"no Q-network for observation shape {obs_shape}")

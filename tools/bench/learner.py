@@ -65,6 +65,7 @@ class Case:
     cnn: str = "nature"  # learner.cnn, for image observations
     precision: str = "fp32"  # learner.cnn_precision (image observations) or learner.mlp_precision (vectors)
     hidden: tuple[int, ...] | None = None  # learner.hidden (None: the default)
+    rows: str = ""  # learner.cnn_rows (image observations; "": the whole frame)
 
 
 CASES = (
@@ -77,6 +78,7 @@ CASES = (
     Case("small-b32", (4, 100, 100), "uint8", 32, "small"),  # learner.cnn=small: the pixel runs' network
     Case("small-b64", (4, 100, 100), "uint8", 64, "small"),
     Case("small-b32-bf16", (4, 100, 100), "uint8", 32, "small", "bf16"),  # learner.cnn_precision=bf16
+    Case("small-b32-bf16-rows", (4, 100, 100), "uint8", 32, "small", "bf16", rows="22:78"),  # learner.cnn_rows
     Case("small-b128", (4, 100, 100), "uint8", 128, "small"),  # the GPU pixel study's batch
     Case("small-b128-bf16", (4, 100, 100), "uint8", 128, "small", "bf16"),
 )
@@ -181,7 +183,8 @@ def learner_step(case: Case, cfg: LearnerConfig) -> tuple[Callable[[], None], to
 def _case_config(case: Case, cfg: LearnerConfig) -> LearnerConfig:
     image = len(case.obs_shape) == 3
     return dataclasses.replace(cfg, cnn=case.cnn, cnn_precision=case.precision if image else "fp32",
-                               mlp_precision="fp32" if image else case.precision, hidden=case.hidden or cfg.hidden)
+                               mlp_precision="fp32" if image else case.precision, hidden=case.hidden or cfg.hidden,
+                               cnn_rows=case.rows)
 
 
 def bare_step(case: Case, cfg: LearnerConfig, device: torch.device) -> Callable[[], None]:
@@ -193,7 +196,7 @@ def bare_step(case: Case, cfg: LearnerConfig, device: torch.device) -> Callable[
     cfg = _case_config(case, cfg)
 
     torch.manual_seed(cfg.seed)
-    online = build_q_network(case.obs_shape, N_ACTIONS, cfg.hidden, cfg.dueling, case.cnn, cfg.cnn_precision,
+    online = build_q_network(case.obs_shape, N_ACTIONS, cfg.hidden, cfg.dueling, cfg.network_cnn, cfg.cnn_precision,
                              mlp_precision=cfg.mlp_precision).to(device)
     target = copy.deepcopy(online).requires_grad_(False)
     # The learner's optimizer (fused Adam, learner/dqn.py): "the same optimizer" is the fair bar.
@@ -292,7 +295,7 @@ def bench(device: str = "auto", *, seconds: float = 3.0, rounds: int = 2, warmup
                     per_round[name].append(measure(step, seconds, dev))
             row: dict[str, Any] = {
                 "name": case.name, "network": type(online).__name__, "precision": case.precision,
-                "obs_shape": list(case.obs_shape),
+                "obs_shape": list(case.obs_shape), "rows": case.rows,
                 "obs_dtype": case.obs_dtype, "batch": case.batch, "n_actions": N_ACTIONS,
                 "hidden": list(_case_config(case, cfg).hidden),
                 "params": sum(p.numel() for p in online.parameters())}

@@ -44,3 +44,15 @@ def _check_choices(obj: Any, section: str) -> None:
     for name, choices in _literal_fields(type(obj)):
         _check(getattr(obj, name) in choices, f"{section}.{name}", f"must be {_choices_text(choices)}",
                getattr(obj, name))
+
+
+def row_window(text: str) -> tuple[int, int] | None:
+    """``"FIRST:END"`` -> (FIRST, END) with 0 <= FIRST < END (learner.cnn_rows); None if it is not one.
+
+    >>> row_window("26:74"), row_window("74:26"), row_window("26")
+    ((26, 74), None, None)
+    """
+    m = re.fullmatch(r"\s*(\d+)\s*:\s*(\d+)\s*", str(text))
+    if m is None or int(m.group(1)) >= int(m.group(2)):
+        return None
+    return int(m.group(1)), int(m.group(2))
