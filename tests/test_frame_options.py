@@ -3,7 +3,7 @@ env.frame_centering, env.frame_scale), each the same way: validated (a bad value
 option's name), passed to the env only when set, its own demo shard name (the frames differ, so the
 demonstrations do), and recorded in a checkpoint so that an evaluation rebuilds the same env.
 What each option draws is tested beside its code's other tests (test_frame_supersample.py,
-test_frame_interval.py, test_frame_centering.py, test_frame_scale.py).
+test_frame_interval.py, test_frame_view.py).
 
 Room: tests, unit. May import: laneshift (any floor), pytest, the standard library and what the code
 under test needs."""
