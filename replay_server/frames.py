@@ -114,7 +114,6 @@ class FrameRingTable(RingTable):
         # spaced k steps apart, a row's oldest frame can be older than the previous row's, and a
         # floor made of those would forbid reusing it: about 7 frames an item were stored then.)
         self.frame_floor = np.zeros(self.capacity, np.int64)
-        self._floor = 0  # the newest row's frame_floor
         self._recent: dict[int, collections.OrderedDict[int, int]] = collections.defaultdict(collections.OrderedDict)
         self.evicted_for_frames = 0  # items dropped before the table was full, their frames overwritten
         self.frames_stored = 0  # frames written (the rest of 2 S per item were shared)
@@ -144,11 +143,12 @@ class FrameRingTable(RingTable):
         keys = np.arange(self.inserted - (n - skip), self.inserted, dtype=np.int64)
         return keys
 
-    def _frame_keys(self, batch: TransitionBatch, begin: int, end: int, actor_index: int) -> tuple[np.ndarray, list]:
-        """Frame keys of rows ``begin:end`` (``[rows, 2 S]``: obs, then next_obs) and the new frames."""
+    def _frame_keys(self, batch: TransitionBatch, begin: int, end: int, actor_index: int,
+                    reuse_from: int) -> tuple[np.ndarray, list]:
+        """Frame keys of rows ``begin:end`` (``[rows, 2 S]``: obs, then next_obs) and the new frames;
+        frames older than ``reuse_from`` (the rows' floor) are stored again rather than reused."""
         store, stack = self.store, self.obs_key.shape[1]
         recent = self._recent[actor_index]
-        reuse_from = self.reuse_from()
         new_frames: list[np.ndarray] = []
         keys_of = np.empty((end - begin, 2 * stack), np.int64)
         for i in range(end - begin):
@@ -172,14 +172,16 @@ class FrameRingTable(RingTable):
                 keys_of[i, j] = k
         return keys_of, new_frames
 
-    def reuse_from(self) -> int:
-        """The oldest frame key the next rows may reuse: their ``frame_floor``."""
-        return max(self._floor, self.store.inserted - self.store.capacity // REUSE_WINDOW)
+    def _reuse_from(self) -> int:
+        """The oldest frame key the next rows may reuse: their ``frame_floor`` (never below the newest
+        row's)."""
+        newest = self.frame_floor[(self.inserted - 1) % self.capacity] if self.inserted else 0
+        return max(int(newest), self.store.inserted - self.store.capacity // REUSE_WINDOW)
 
     def _insert_rows(self, batch: TransitionBatch, begin: int, end: int, actor_index: int) -> None:
         store, stack = self.store, self.obs_key.shape[1]
-        floor = self.reuse_from()
-        keys_of, new_frames = self._frame_keys(batch, begin, end, actor_index)
+        floor = self._reuse_from()
+        keys_of, new_frames = self._frame_keys(batch, begin, end, actor_index, floor)
         keys = np.arange(self.inserted, self.inserted + end - begin, dtype=np.int64)
         # Drop the items the table's capacity pushes out, then those whose frames the new frames
         # may overwrite: a prefix of the live items, since their frame floors rise with their keys.
@@ -197,7 +199,7 @@ class FrameRingTable(RingTable):
             self.frames_stored += len(new_frames)
         rows = keys % self.capacity
         self.obs_key[rows], self.next_key[rows] = keys_of[:, :stack], keys_of[:, stack:]
-        self.frame_floor[rows] = self._floor = floor
+        self.frame_floor[rows] = floor
         for name in ("action", "reward", "terminated", "truncated", "steps"):
             getattr(self, name)[rows] = getattr(batch, name)[begin:end]
         self.actor[rows] = actor_index
@@ -213,7 +215,6 @@ class FrameRingTable(RingTable):
         if n:
             oldest = np.minimum(self.obs_key[:n].min(axis=1), self.next_key[:n].min(axis=1))
             self.frame_floor[:n] = np.minimum.accumulate(oldest[::-1])[::-1]
-            self._floor = int(self.frame_floor[n - 1])
 
     def forget_actor(self, actor_index: int) -> None:
         """An evicted actor's recent frames are not reused by the next actor given its index."""
