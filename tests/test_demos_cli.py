@@ -47,6 +47,11 @@ def test_register_under_a_parent_parser() -> None:
     assert callable(args.func) and args.episodes == 2 and args.seed == 0
     assert env_kwargs_from_args(args) == {"observation": "grayscale", "max_steps": 50,
                                           "initial_lane": 1, "reward_preset": 5}
+    # The option's own spelling gives the env the same number (it once passed the text "5", which the
+    # env refused).
+    args = parser.parse_args(["demos", "generate", "--scenario", "straight", "--episodes", "2", "--out", "x",
+                              "--reward-preset", "5"])
+    assert env_kwargs_from_args(args) == {"reward_preset": 5}
     args = parser.parse_args(["demos", "inspect", "some/dir"])
     assert callable(args.func) and args.shard == "some/dir"
 

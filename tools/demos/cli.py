@@ -67,7 +67,8 @@ def _add_env_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--observation", choices=("vector", "grayscale"),
                         help="observation type (default: the env's)")
     parser.add_argument("--max-steps", type=positive_int, help="episode length limit (env kwarg max_steps)")
-    parser.add_argument("--reward-preset", help="reward condition (env kwarg reward_preset)")
+    parser.add_argument("--reward-preset", type=positive_int,
+                        help="reward condition (env kwarg reward_preset: 1-5, docs/environments.md)")
     parser.add_argument("--initial-lane", type=_json_or_str,
                         help="initial lane (env kwarg initial_lane)")
     parser.add_argument("--env-kwarg", type=_kwarg, action="append", metavar="KEY=VALUE",
