@@ -1,6 +1,7 @@
 #!/bin/bash
 # Pixel probe 13 (docs/RESULTS.md, pixels on the converging learner): probe 12 (the CNN on the road's band,
-# 32 sampled rows per env step) with frames 8 steps apart (env.frame_interval=8; probe 12: 4), seed 0, 150,000 env steps; revision 8029542, from a frozen checkout.
+# 32 sampled rows per env step) with frames 8 steps apart (env.frame_interval=8; probe 12: 4), seed 0,
+# 150,000 env steps; revision 8029542, from a frozen checkout.
 laneshift experiment protocol --scenario straight --method dqfd-bc-anneal --seeds 0 \
   --env-steps 150000 --road straight-pixels --out runs/protocol/straight-pixels-fi8-rows-spi32-150k \
   --set env.observation=grayscale --set env.frame_interval=8 --set learner.cnn=small --set learner.batch_size=32 \
