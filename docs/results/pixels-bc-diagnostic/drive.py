@@ -10,19 +10,21 @@ Room: a study script (docs/results). May import: anything in laneshift, torch, n
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 
 import numpy as np
 import torch
 
-from laneshift.actors.envs import make_env
+from laneshift.actors.evaluation import GreedyPolicy, evaluate_policy
+from laneshift.config import EnvConfig
 from laneshift.qnet import build_q_network
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("network")
-    parser.add_argument("env_kwargs", help="the env's options as JSON (the shard's view)")
+    parser.add_argument("env_kwargs", help="the env's options (env.* fields) as JSON: the shard's view")
     parser.add_argument("--episodes", type=int, default=50)
     args = parser.parse_args()
     torch.set_num_threads(1)
@@ -30,21 +32,17 @@ def main() -> None:
     net = build_q_network(tuple(saved["shape"]), 9, cnn=saved["cnn"])
     net.load_state_dict(saved["state"])
     net.eval()
-    env = make_env("straight", reward_preset=5, initial_lane="random", **json.loads(args.env_kwargs))
-    survived = achieved = 0
-    for episode in range(args.episodes):
-        obs, _ = env.reset(seed=200_000 + episode)
-        for _ in range(300):
-            with torch.no_grad():
-                action = int(net(torch.from_numpy(np.asarray(obs))[None]).argmax())
-            obs, _, terminated, truncated, info = env.step(action)
-            if terminated or truncated:
-                break
-        crashed = bool(info.get("crashed"))
-        survived += not crashed
-        achieved += (not crashed) and bool(info.get("on_target_lane"))
-    print(json.dumps({"network": args.network, "episodes": args.episodes, "survival": survived / args.episodes,
-                      "achievement": achieved / args.episodes}))
+
+    def greedy(obs: np.ndarray) -> np.ndarray:
+        with torch.no_grad():
+            return net(torch.from_numpy(obs)).argmax(1).numpy()
+
+    env_cfg = dataclasses.replace(EnvConfig(scenario="straight", reward_preset=5, initial_lane="random", max_steps=300),
+                                  **json.loads(args.env_kwargs))
+    # The project's own greedy evaluation (what `laneshift eval` and the protocol's tests run).
+    result = evaluate_policy(lambda env: GreedyPolicy(greedy), env_cfg, args.episodes, seed=200_000)
+    print(json.dumps({"network": args.network, "episodes": args.episodes, "survival": result["survival_rate"],
+                      "achievement": result["achievement_rate"]}))
 
 
 if __name__ == "__main__":
