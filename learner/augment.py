@@ -7,12 +7,11 @@ replicate padding and crops back), so a car seen a few pixels away is still the 
 Written here rather than taken from a library: torchvision's RandomCrop draws one offset per call,
 not per row; this crops the uint8 frames with a fresh offset per row.
 
-Room: learner (component). May import: numpy, torch.
+Room: learner (component). May import: torch.
 """
 
 from __future__ import annotations
 
-import numpy as np
 import torch
 import torch.nn.functional as F
 
@@ -22,34 +21,16 @@ def random_shift(frames: torch.Tensor, pad: int, generator: torch.Generator | No
     random offset in [-pad, pad] along both axes, edges repeated; the same dtype and device.
 
     DrQ's own form: replicate-pad by ``pad``, then crop the original size at a random corner per
-    row. On the CPU the pad and the crops run in numpy: each torch copy of a 40 kB crop is split
-    over the OpenMP threads, and with another process on the cores (the replay server beside the
-    learner) the threads wait for each other's time slices: in py-spy 40 % of a pixel run's update
-    thread sat in these copies (docs/results/pixels-shift-numpy/). The same offsets, the same output.
+    row. The crops are copied row by row: for 32 rows of 4 x 100 x 100 uint8 frames 0.5-1.7 ms,
+    against 4.7-7.8 ms for one advanced-indexing gather over the whole batch (measured on the
+    2-core dev machine beside a training run).
     """
     if frames.dim() != 4:
         raise ValueError(f"random_shift: expected [batch, channels, height, width] frames, got shape {tuple(frames.shape)}")
-    rows = frames.shape[0]
-    corners = (torch.randint(-pad, pad + 1, (2, rows), generator=generator) + pad).tolist()
-    on_numpy = frames.device.type == "cpu" and frames.dtype != torch.bfloat16 and not frames.requires_grad
-    return (_crops_numpy if on_numpy else _crops_torch)(frames, pad, list(zip(*corners)))
-
-
-def _crops_numpy(frames: torch.Tensor, pad: int, corners: list[tuple[int, int]]) -> torch.Tensor:
-    """The crops at ``corners`` (top, left in the padded frame) of the edge-padded CPU ``frames``, in numpy."""
-    height, width = frames.shape[2:]
-    padded = np.pad(frames.numpy(), ((0, 0), (0, 0), (pad, pad), (pad, pad)), mode="edge")
-    out = np.empty(frames.shape, dtype=padded.dtype)
-    for row, (top, left) in enumerate(corners):
-        out[row] = padded[row, :, top:top + height, left:left + width]
-    return torch.from_numpy(out)
-
-
-def _crops_torch(frames: torch.Tensor, pad: int, corners: list[tuple[int, int]]) -> torch.Tensor:
-    """The same crops in torch, on the frames' device (a GPU's, or bfloat16 frames numpy cannot hold)."""
-    height, width = frames.shape[2:]
+    rows, _, height, width = frames.shape
     padded = F.pad(frames, (pad, pad, pad, pad), mode="replicate")
+    corners = (torch.randint(-pad, pad + 1, (2, rows), generator=generator) + pad).tolist()
     out = torch.empty_like(frames)
-    for row, (top, left) in enumerate(corners):
+    for row, (top, left) in enumerate(zip(*corners)):
         out[row] = padded[row, :, top:top + height, left:left + width]
     return out

@@ -49,14 +49,6 @@ def test_the_offsets_repeat_for_a_seed_and_differ_between_seeds():
     assert not torch.equal(a, random_shift(frames, 4, torch.Generator().manual_seed(4)))
 
 
-def test_the_numpy_crops_are_the_torch_crops():
-    """The CPU path (numpy) and the GPU path (torch, run here on the CPU) give the same pixels."""
-    from laneshift.learner.augment import _crops_numpy, _crops_torch
-    frames = torch.randint(0, 255, (6, 4, 30, 20), dtype=torch.uint8, generator=torch.Generator().manual_seed(5))
-    corners = [(0, 0), (8, 8), (3, 5), (8, 0), (0, 8), (4, 4)]
-    assert torch.equal(_crops_numpy(frames, 4, corners), _crops_torch(frames, 4, corners))
-
-
 def test_a_batch_that_is_not_frames_is_refused():
     with pytest.raises(ValueError, match="batch, channels, height, width"):
         random_shift(torch.zeros(4, 8), 2)

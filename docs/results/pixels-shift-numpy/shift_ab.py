@@ -1,9 +1,9 @@
-"""The DrQ shift's crops in torch against numpy (learner/augment.py), A B A B on 32 rows of
+"""The DrQ shift's crops (learner/augment.py) in torch against numpy, A B A B on 32 rows of
 4 x 100 x 100 uint8 frames, torch on 2 threads as the learner runs it; the two must give the same
 pixels. Run it beside a training run to see what the learner sees when another process shares its
 cores, and on a quiet machine for the baseline.
 
-Room: docs (a study's script). May import: laneshift (any floor), numpy, torch, the standard library.
+Room: docs (a study's script). May import: numpy, torch, the standard library.
 """
 
 from __future__ import annotations
@@ -12,9 +12,29 @@ import argparse
 import json
 import time
 
+import numpy as np
 import torch
+import torch.nn.functional as F
 
-from laneshift.learner.augment import _crops_numpy, _crops_torch
+
+def _crops_torch(frames: torch.Tensor, pad: int, corners: list[tuple[int, int]]) -> torch.Tensor:
+    """learner/augment.py's crops: replicate-pad, then one copy per row."""
+    height, width = frames.shape[2:]
+    padded = F.pad(frames, (pad, pad, pad, pad), mode="replicate")
+    out = torch.empty_like(frames)
+    for row, (top, left) in enumerate(corners):
+        out[row] = padded[row, :, top:top + height, left:left + width]
+    return out
+
+
+def _crops_numpy(frames: torch.Tensor, pad: int, corners: list[tuple[int, int]]) -> torch.Tensor:
+    """The same crops in numpy (no threads)."""
+    height, width = frames.shape[2:]
+    padded = np.pad(frames.numpy(), ((0, 0), (0, 0), (pad, pad), (pad, pad)), mode="edge")
+    out = np.empty(frames.shape, dtype=padded.dtype)
+    for row, (top, left) in enumerate(corners):
+        out[row] = padded[row, :, top:top + height, left:left + width]
+    return torch.from_numpy(out)
 
 
 def main() -> None:
