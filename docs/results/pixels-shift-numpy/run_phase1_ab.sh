@@ -2,6 +2,7 @@
 # Real-run phase-1 A/B: each arm a laneshift train run of the probe-14 recipe, stopped after 170 s; updates/s from
 # its metrics between 70 s and the end. Arms: torch2 = revision 8029542 (torch crops), 2 phase-1 threads;
 # numpy2 = revision fe4a4bb (numpy crops), 2 threads; numpy1 = fe4a4bb with learner.phase1_threads=1.
+# WT: this machine's frozen checkouts at those revisions, each with its own venv; SHARD: probe 14's demo shard.
 SHARD=/work/study-w21/runs/protocol/straight-pixels-fi8-rows-spi32-pre60k-150k/demos/straight-grayscale4x100x100-fi8-p5-scripted-v2-260ep
 SETS="--set env.frame_interval=8 --set learner.cnn=small --set learner.batch_size=32 --set learner.cnn_rows=22:78
  --set learner.phase1_updates=60000 --set replay.samples_per_insert=32 --set replay.capacity=200000 --set learner.lr=1e-4
