@@ -194,6 +194,8 @@ class DoubleDQN:
         if cfg.augment == "shift" and len(obs_shape) == 3:
             self._augment_gen = torch.Generator().manual_seed(cfg.seed + 1)
         self.updates = 0
+        # The factor on both imitation losses (learner.imitation_final's schedule, set by the loop).
+        self.imitation_scale = 1.0
         self._last: _UpdateRecord | None = None
         self.reset_optimizer()
 
@@ -318,22 +320,24 @@ class DoubleDQN:
         loss = (huber * _tensor(weight, torch.float32, dev)).mean() if weight is not None else huber.mean()
         margin_loss = bc_loss = q.new_zeros(())
         demo_np = batch.get("is_demo")
-        if demo_np is not None and (cfg.margin_loss_weight > 0 or cfg.bc_loss_weight > 0) and np.any(demo_np):
+        margin_weight = cfg.margin_loss_weight * self.imitation_scale
+        bc_weight = cfg.bc_loss_weight * self.imitation_scale
+        if demo_np is not None and (margin_weight > 0 or bc_weight > 0) and np.any(demo_np):
             demo = _tensor(np.asarray(demo_np) != 0, torch.bool, dev)
             qd, ad = q_all[demo], action[demo]
-            if cfg.margin_loss_weight > 0:
+            if margin_weight > 0:
                 # DQfD: on demo rows the demonstrator's action must beat every other by `margin`.
                 penalty = torch.full_like(qd, cfg.margin)
                 penalty.scatter_(1, ad[:, None], 0.0)
                 margin_loss = ((qd + penalty).max(dim=1).values - q[demo]).mean()
-                loss = loss + cfg.margin_loss_weight * margin_loss
-            if cfg.bc_loss_weight > 0:
+                loss = loss + margin_weight * margin_loss
+            if bc_weight > 0:
                 # Supervised imitation: cross-entropy of softmax(Q(s, .)) against the demonstrator's
                 # action on demo rows. Unlike the margin (a fixed 0.8 at Q-values near 100), it keeps
                 # pushing until the demo action clearly leads, which is what makes the small action
                 # gaps of 10 Hz control follow the demonstrator (docs/results-history.md, round 2).
                 bc_loss = F.cross_entropy(qd, ad)
-                loss = loss + cfg.bc_loss_weight * bc_loss
+                loss = loss + bc_weight * bc_loss
 
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()

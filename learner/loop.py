@@ -312,16 +312,23 @@ class Learner:
         if time.monotonic() < next_log:
             return next_log
         self._log()
-        self._follow_lr_schedule()
+        self._follow_schedules()
         self._maybe_save_state()
         return time.monotonic() + self.lcfg.log_every_s
 
-    def _follow_lr_schedule(self) -> None:
-        """``learner.lr_final``: the step size falls linearly from ``lr`` with the run's env steps
-        (read once per log interval; pre-training, which has none, keeps ``lr``)."""
-        if not self.lcfg.lr_final or self.phase == 1:
+    def _follow_schedules(self) -> None:
+        """``learner.lr_final`` and ``learner.imitation_final``: the step size and the imitation
+        losses' weight fall linearly with the run's env steps (read once per log interval, the first
+        one at the loop's start, so a restored learner takes up its place at once; pre-training,
+        which has no env steps, keeps both whole)."""
+        if self.phase == 1:
             return
-        self.agent.set_lr(scheduled_lr(self.lcfg.lr, self.lcfg.lr_final, self.env_steps, self.cfg.train.env_steps))
+        lcfg = self.lcfg
+        if lcfg.lr_final:
+            self.agent.set_lr(linear_schedule(lcfg.lr, lcfg.lr_final, self.env_steps, self.cfg.train.env_steps))
+        if lcfg.imitation_final < 1.0:
+            fade = lcfg.imitation_fade_steps or self.cfg.train.env_steps
+            self.agent.imitation_scale = linear_schedule(1.0, lcfg.imitation_final, self.env_steps, fade)
 
     def _maybe_save_state(self) -> None:
         every = self.lcfg.checkpoint_every_s
@@ -415,7 +422,7 @@ class Learner:
             training_wait_s=round(self.sample_wait_s - self._wait_before_first_batch, 2)
             if self.first_batch_at is not None else 0.0,
             return_mean=e.return_mean(), length_mean=e.length_mean(), crash_rate=e.crash_rate(),
-            achievement_rate=e.achievement_rate(), epsilon=e.epsilon(),
+            achievement_rate=e.achievement_rate(), epsilon=e.epsilon(), imitation_scale=self.agent.imitation_scale,
             **{k: self.last_update.get(k) for k in METRIC_NAMES},
             replay_size=r.get("tables", {}).get("online", {}).get("size"),
             demo_share_samples=r.get("demo_share_recent_samples"),
@@ -469,11 +476,12 @@ class Learner:
             log_eval(self.metrics, result)
 
 
-def scheduled_lr(lr: float, lr_final: float, env_steps: int, budget: int) -> float:
-    """``lr`` at 0 env steps, ``lr_final`` at the budget and after it, linear in between.
+def linear_schedule(start: float, end: float, env_steps: int, span: int) -> float:
+    """``start`` at 0 env steps, ``end`` at ``span`` env steps and after, linear in between (the
+    step size of ``learner.lr_final``, the imitation losses' factor of ``learner.imitation_final``).
 
-    >>> scheduled_lr(1e-3, 1e-4, 50, 100)
+    >>> linear_schedule(1e-3, 1e-4, 50, 100)
     0.00055
     """
-    frac = min(max(env_steps / budget, 0.0), 1.0) if budget > 0 else 1.0
-    return lr + frac * (lr_final - lr)
+    frac = min(max(env_steps / span, 0.0), 1.0) if span > 0 else 1.0
+    return start + frac * (end - start)

@@ -53,6 +53,8 @@ class LearnerStatus:
     #: Lane changes only: the LKA plant has no target lane.
     achievement_rate: float | None
     epsilon: float | None
+    #: The factor on the imitation losses now (learner.imitation_final's schedule; 1 = whole).
+    imitation_scale: float
     # The interval's last update (dqn.METRIC_NAMES), read back once per log interval.
     loss: float | None
     q_mean: float | None
@@ -111,7 +113,8 @@ def tensorboard_scalars(status: LearnerStatus, replay_stats: dict[str, Any]) -> 
     s = status
     tb: dict[str, float | None] = {f"learner/{k}": getattr(s, k) for k in METRIC_NAMES}
     tb.update({"learner/updates": s.updates, "learner/updates_per_s": s.updates_per_s, "learner/version": s.version,
-               "learner/phase": s.phase, "learner/sample_wait_share": s.sample_wait_share, "learner/lr": s.lr})
+               "learner/phase": s.phase, "learner/sample_wait_share": s.sample_wait_share, "learner/lr": s.lr,
+               "learner/imitation_scale": s.imitation_scale})
     tb.update({"train/env_steps_per_s": s.env_steps_per_s, "train/episodes": s.episodes,
                "train/return_mean": s.return_mean, "train/length_mean": s.length_mean,
                "train/crash_rate": s.crash_rate, "train/achievement_rate": s.achievement_rate,

@@ -195,12 +195,12 @@ def test_weight_average_is_the_ema_of_the_online_weights_and_what_is_handed_out(
 
 
 def test_learning_rate_follows_the_env_step_schedule():
-    from laneshift.learner.loop import scheduled_lr
+    from laneshift.learner.loop import linear_schedule
 
-    assert scheduled_lr(1e-3, 1e-4, 0, 100) == pytest.approx(1e-3)
-    assert scheduled_lr(1e-3, 1e-4, 50, 100) == pytest.approx(5.5e-4)
-    assert scheduled_lr(1e-3, 1e-4, 100, 100) == pytest.approx(1e-4)
-    assert scheduled_lr(1e-3, 1e-4, 250, 100) == pytest.approx(1e-4)  # past the budget: stays at the end value
+    assert linear_schedule(1e-3, 1e-4, 0, 100) == pytest.approx(1e-3)
+    assert linear_schedule(1e-3, 1e-4, 50, 100) == pytest.approx(5.5e-4)
+    assert linear_schedule(1e-3, 1e-4, 100, 100) == pytest.approx(1e-4)
+    assert linear_schedule(1e-3, 1e-4, 250, 100) == pytest.approx(1e-4)  # past the budget: stays at the end value
     agent = DoubleDQN((4,), 3, _cfg(lr=1e-3))
     agent.set_lr(2e-4)
     assert agent.lr == pytest.approx(2e-4)
@@ -219,6 +219,10 @@ def test_schedule_and_average_options_are_checked():
         LearnerConfig(ema_decay=1.0)
     with pytest.raises(ConfigError, match="learner.terminal_value"):
         LearnerConfig(terminal_value=float("nan"))
+    with pytest.raises(ConfigError, match="learner.imitation_final"):
+        LearnerConfig(imitation_final=1.5)
+    with pytest.raises(ConfigError, match="learner.imitation_fade_steps"):
+        LearnerConfig(imitation_fade_steps=-1)
 
 
 # --------------------------------------------------------------------------- weights
@@ -423,6 +427,33 @@ def test_cross_entropy_on_demo_rows_teaches_the_demonstrators_action_through_a_d
     # Rows not from the demos get no imitation term.
     plain = DoubleDQN((4,), 3, LearnerConfig(hidden=(32,), seed=1, bc_loss_weight=1.0, dueling=True))
     assert plain.update({**batch, "is_demo": np.zeros(64, np.uint8)})["bc_loss"] == 0.0
+
+
+def test_the_imitation_scale_weighs_both_imitation_losses_and_zero_leaves_the_td_loss_alone():
+    from laneshift.config import LearnerConfig
+    from laneshift.learner.dqn import DoubleDQN
+
+    rng = np.random.default_rng(2)
+    obs = rng.normal(size=(32, 4)).astype(np.float32)
+    batch = {"obs": obs, "action": rng.integers(0, 3, 32), "reward": rng.normal(size=32).astype(np.float32),
+             "next_obs": rng.normal(size=(32, 4)).astype(np.float32), "terminated": np.zeros(32, np.uint8),
+             "steps": np.ones(32, np.uint8), "weight": np.ones(32, np.float32), "is_demo": np.ones(32, np.uint8)}
+    imitating = dict(hidden=(16,), seed=3, dueling=True, margin_loss_weight=1.0, bc_loss_weight=1.0)
+    faded, plain = DoubleDQN((4,), 3, LearnerConfig(**imitating)), DoubleDQN((4,), 3, LearnerConfig(hidden=(16,), seed=3,
+                                                                                                  dueling=True))
+    faded.imitation_scale = 0.0
+    for _ in range(5):
+        m_faded, m_plain = faded.update(batch), plain.update(batch)
+    # At 0 the update is the TD update of a learner without imitation losses, step for step.
+    assert m_faded["loss"] == m_plain["loss"] and m_faded["bc_loss"] == m_faded["margin_loss"] == 0.0
+    assert all(torch.equal(a, b) for a, b in zip(faded.online.parameters(), plain.online.parameters()))
+    # At 0.5 the loss is the TD loss plus half of each imitation loss.
+    half, whole = DoubleDQN((4,), 3, LearnerConfig(**imitating)), DoubleDQN((4,), 3, LearnerConfig(**imitating))
+    half.imitation_scale = 0.5
+    m_half, m_whole = half.update(batch), whole.update(batch)
+    assert m_half["bc_loss"] == m_whole["bc_loss"] > 0 and m_half["margin_loss"] == m_whole["margin_loss"] > 0
+    td = m_whole["loss"] - m_whole["bc_loss"] - m_whole["margin_loss"]
+    assert m_half["loss"] == pytest.approx(td + 0.5 * (m_whole["bc_loss"] + m_whole["margin_loss"]), rel=1e-5)
 
 
 def test_heads_per_road_checkpoints_load_back_with_their_heads(tmp_path):

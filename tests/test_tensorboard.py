@@ -173,6 +173,27 @@ def test_every_metric_at_env_step_steps_that_never_go_back_across_a_resume(tmp_p
     assert len(episodes) == 2 * (4 + 5) and [r["episode"] for r in episodes] == list(range(1, 19))
 
 
+@pytest.mark.parametrize("fade_steps, expected", [(0, [1.0, 0.5, 0.0, 0.0]), (250, [1.0, 0.0, 0.0, 0.0])])
+def test_the_imitation_losses_fade_with_the_env_steps_and_the_scale_is_logged(tmp_path, fade_steps, expected):
+    links = FakeLinks()
+    learner = _learner(tmp_path, links, **{"train.env_steps": 1000, "learner.bc_loss_weight": 1.0,
+                                           "learner.imitation_final": 0.0, "learner.imitation_fade_steps": fade_steps})
+    learner.publish()
+    assert learner.agent.imitation_scale == 1.0
+    scales = []
+    for steps in (0, 500, 1000, 2000):
+        links.env_steps = steps
+        learner._async_step()
+        learner._log_when_due(0.0)
+        scales.append(learner.agent.imitation_scale)
+    learner._finish()
+    assert scales == pytest.approx(expected)
+    logged = [json.loads(line) for line in (tmp_path / "metrics.jsonl").read_text().splitlines()]
+    # Each learner line holds the scale its interval trained with: the one set at the line before.
+    assert [r["imitation_scale"] for r in logged if r["kind"] == "learner"][1:4] == pytest.approx(expected[:3])
+    assert "learner/imitation_scale" in _scalars(tmp_path / "tb").Tags()["scalars"]
+
+
 def test_hparams_hold_the_flattened_config_and_final_metrics(tmp_path):
     from tensorboard.plugins.hparams import plugin_data_pb2
 

@@ -374,6 +374,14 @@ class LearnerConfig:
     margin: float = 0.8  # DQfD's m: how far the demonstrator's action must stand above the others
     # Supervised imitation on demo rows: cross-entropy of softmax(Q(s, .)) against the demo action. 0 = off.
     bc_loss_weight: float = 0.0
+    # The imitation losses' weight (margin_loss_weight and bc_loss_weight together) at the end of
+    # phase 2, as a fraction of their own: it falls linearly from 1 as the run's env steps go from 0
+    # to imitation_fade_steps (0 = train.env_steps) and stays there; pre-training keeps the full
+    # weight. 1 = constant (DQfD's). Below 1 the demonstrator's actions pull less as the agent's own
+    # experience grows, so the TD loss alone decides where the demonstrator was wrong: a way past a
+    # teacher that the imitation holds the network level with.
+    imitation_final: float = 1.0
+    imitation_fade_steps: int = 0  # env steps over which learner.imitation_final is reached (0 = the budget)
     dueling: bool = False  # dueling head (Wang et al. 2016): Q = V + A - mean A
     # One Q head per road on a shared trunk (env.scenario=allroads only: 4, one per road, picked by the
     # road's one-hot that ends its observation). 1 = one head for every road.
@@ -443,6 +451,11 @@ class LearnerConfig:
         _check(self.margin_loss_weight >= 0, "learner.margin_loss_weight", "must be >= 0", self.margin_loss_weight)
         _check(self.margin >= 0, "learner.margin", "must be >= 0", self.margin)
         _check(self.bc_loss_weight >= 0, "learner.bc_loss_weight", "must be >= 0", self.bc_loss_weight)
+        _check(0.0 <= self.imitation_final <= 1.0, "learner.imitation_final", "must be in [0, 1] (1 = constant)",
+               self.imitation_final)
+        _check(not isinstance(self.imitation_fade_steps, bool) and isinstance(self.imitation_fade_steps, int)
+               and self.imitation_fade_steps >= 0, "learner.imitation_fade_steps", "must be an int >= 0 (0 = the budget)",
+               self.imitation_fade_steps)
         _check(self.seed >= 0, "learner.seed", "must be >= 0", self.seed)
         _check(self.checkpoint_every_s >= 0, "learner.checkpoint_every_s", "must be >= 0", self.checkpoint_every_s)
         _check(self.log_every_s > 0, "learner.log_every_s", "must be > 0", self.log_every_s)
