@@ -375,8 +375,8 @@ class LearnerConfig:
     # Supervised imitation on demo rows: cross-entropy of softmax(Q(s, .)) against the demo action. 0 = off.
     bc_loss_weight: float = 0.0
     # The imitation losses' weight (margin_loss_weight and bc_loss_weight together) at the end of
-    # phase 2, as a fraction of their own: it falls linearly from 1 as the run's env steps go from 0
-    # to imitation_fade_steps (0 = train.env_steps) and stays there; pre-training keeps the full
+    # their fall, as a fraction of their own: it falls linearly from 1 as the run's env steps go from
+    # 0 to imitation_fade_steps (0 = train.env_steps) and stays there; pre-training keeps the full
     # weight. 1 = constant (DQfD's). Below 1 the demonstrator's actions pull less as the agent's own
     # experience grows, so the TD loss alone decides where the demonstrator was wrong: a way past a
     # teacher that the imitation holds the network level with.
