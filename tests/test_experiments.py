@@ -88,6 +88,18 @@ def test_train_method_applies_the_named_settings_under_mode_and_set(monkeypatch,
     assert f"--method: unknown 'dqfq' (known: {known})" in capsys.readouterr().err
 
 
+def test_the_fade_method_is_the_shield_method_with_the_imitation_losses_fading_to_zero():
+    """The published `*-imfade` networks were trained as dqfd-bc-alongside-safe-shield with
+    learner.imitation_final=0: the preset of that name must be exactly those settings."""
+    from laneshift.config import METHODS, load_run_config
+
+    fade, shield = METHODS["dqfd-bc-alongside-safe-shield-fade"], METHODS["dqfd-bc-alongside-safe-shield"]
+    assert fade == {**shield, "learner.imitation_final": 0.0}
+    cfg = load_run_config(None, fade)
+    assert cfg.learner.imitation_final == 0.0 and cfg.env.shield and cfg.learner.bc_loss_weight == 1.0
+    assert cfg.learner.imitation_fade_steps == 0  # the fall ends with the budget
+
+
 def test_the_human_like_stand_in_row_runs_on_the_test_episodes_of_both_lanes():
     from laneshift.config import EnvConfig
     from laneshift.tools.studies.table2 import HUMAN_LIKE_ROW, human_like_lanes
