@@ -28,6 +28,10 @@ _ANNEALED_LEARNER: dict[str, Any] = {
     "learner.n_step": 10, "learner.dueling": True, "replay.capacity": 300_000,
     "learner.lr_final": 5e-5, "learner.ema_decay": 0.999, "actor.epsilon_final": 0.01}
 
+# dqfd-bc-alongside-safe (below) behind the safety shield: the recipe the shielded presets share.
+_SHIELDED: dict[str, Any] = {**_DQFD, **_ANNEALED_LEARNER, "learner.bc_loss_weight": 1.0,
+                             "env.alongside_features": True, "learner.terminal_value": -1000.0, "env.shield": True}
+
 METHODS: dict[str, dict[str, Any]] = {
     "none": {"replay.demo_mode": "none"},
     "retention": {"replay.demo_mode": "retention"},
@@ -70,9 +74,7 @@ METHODS: dict[str, dict[str, Any]] = {
     # is the network and the shield together; the network alone is `--set env.shield=false` at eval.
     # Chosen on validation episodes: the published networks behind it crashed in 0-4 of 200 episodes
     # per setting on every road (docs/RESULTS.md, "behind a safety shield").
-    "dqfd-bc-alongside-safe-shield": {**_DQFD, **_ANNEALED_LEARNER, "learner.bc_loss_weight": 1.0,
-                                      "env.alongside_features": True, "learner.terminal_value": -1000.0,
-                                      "env.shield": True},
+    "dqfd-bc-alongside-safe-shield": _SHIELDED,
     # dqfd-bc-alongside-safe-shield whose imitation losses (the margin and the cross-entropy on demo rows)
     # fade linearly to 0 over phase 2 (learner.imitation_final): the pull towards the driver's actions
     # goes, the demos stay in the replay. 3 seeds each, test episodes: above the scripted driver behind
@@ -80,16 +82,12 @@ METHODS: dict[str, dict[str, Any]] = {
     # vehicles; lower on merge's validation episodes (seed 0), so merge keeps the gaps recipe below
     # (docs/RESULTS.md, "Past the teacher"). The published networks were trained as
     # `--method dqfd-bc-alongside-safe-shield --set learner.imitation_final=0`, the same settings.
-    "dqfd-bc-alongside-safe-shield-fade": {**_DQFD, **_ANNEALED_LEARNER, "learner.bc_loss_weight": 1.0,
-                                           "env.alongside_features": True, "learner.terminal_value": -1000.0,
-                                           "env.shield": True, "learner.imitation_final": 0.0},
+    "dqfd-bc-alongside-safe-shield-fade": {**_SHIELDED, "learner.imitation_final": 0.0},
     # dqfd-bc-alongside-safe-shield that sees, on each side, where the nearest gap long enough to
     # merge into is (env.gap_features: 4 floats more, the scripted driver's alignment target). Chosen
     # on merge's validation episodes (seed 0, 200 per setting): 100 / 93.5 and 99.5 / 88.0 against
     # 99.5 / 88.0 and 99.5 / 82.0 without them (docs/RESULTS.md, "gap features").
-    "dqfd-bc-alongside-gaps-safe-shield": {**_DQFD, **_ANNEALED_LEARNER, "learner.bc_loss_weight": 1.0,
-                                           "env.alongside_features": True, "env.gap_features": True,
-                                           "learner.terminal_value": -1000.0, "env.shield": True},
+    "dqfd-bc-alongside-gaps-safe-shield": {**_SHIELDED, "env.gap_features": True},
     # The LKA plant's recipe (MATLAB's lane-keeping example has no demonstrations): one-step Double
     # DQN with a larger step size, learning from 1,000 items on and 64 samples per inserted item;
     # 20,000 env steps centre the car (docs/RESULTS.md, LKA; `laneshift experiment lka`).
