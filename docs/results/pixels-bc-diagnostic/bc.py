@@ -34,6 +34,8 @@ def main() -> None:
     parser.add_argument("--rows", default="", help="learner.cnn_rows for frames (FIRST:END; default the whole frame)")
     parser.add_argument("--lr", type=float, default=1e-4)
     parser.add_argument("--save", default="", help="where to save the network (for drive.py)")
+    parser.add_argument("--save-at", default="", help="also save at these update counts (comma-separated), "
+                        "as SAVE with -<updates> before its suffix")
     parser.add_argument("--seed", type=int, default=0, help="the network's initialisation, the batches and the shifts")
     args = parser.parse_args()
     torch.set_num_threads(1)
@@ -75,6 +77,7 @@ def main() -> None:
     p = np.bincount(tail, minlength=9) / len(tail)
     entropy = float(-(p[p > 0] * np.log(p[p > 0])).sum())
     print(json.dumps({"label": args.label, "marginal_entropy": entropy}), flush=True)
+    save_at = {int(u) for u in args.save_at.split(",") if u}
     start = time.time()
     for update in range(1, args.updates + 1):
         o, a = batch(train[rng.integers(0, len(train), 32)])
@@ -89,6 +92,10 @@ def main() -> None:
             print(json.dumps({"label": args.label, "updates": update, "heldout_ce": round(ce, 4),
                               "heldout_acc": round(acc, 4), "train_ce_last": round(loss.item(), 4),
                               "s": round(time.time() - start, 1)}), flush=True)
+        if args.save and update in save_at:
+            stem, dot, suffix = args.save.rpartition(".")
+            torch.save({"state": net.state_dict(), "shape": shape, "cnn": cnn},
+                       f"{stem}-{update}.{suffix}" if dot else f"{args.save}-{update}")
     if args.save:
         torch.save({"state": net.state_dict(), "shape": shape, "cnn": cnn}, args.save)
 

@@ -42,7 +42,7 @@ def main() -> None:
     # The project's own greedy evaluation (what `laneshift eval` and the protocol's tests run).
     result = evaluate_policy(lambda env: GreedyPolicy(greedy), env_cfg, args.episodes, seed=200_000)
     print(json.dumps({"network": args.network, "episodes": args.episodes, "survival": result["survival_rate"],
-                      "achievement": result["achievement_rate"]}))
+                      "achievement": result["achievement_rate"], "initial_lane": env_cfg.initial_lane}))
 
 
 if __name__ == "__main__":

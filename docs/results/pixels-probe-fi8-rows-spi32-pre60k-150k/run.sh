@@ -11,3 +11,6 @@ laneshift experiment protocol --scenario straight --method dqfd-bc-anneal --seed
 # Seed 0 ran 2026-11-28 from a frozen checkout, its demo shard probe 13's (hard-linked in; the command makes it when
 # missing); its phase 1 partly beside a py-spy profile and a micro-benchmark (docs/results/pixels-shift-numpy/).
 # Published with the same command and --road straight-pixels-fi8-rows-pre60k --publish results/checkpoints.
+# Its final network on the 200 validation episodes per setting (2026-11-28, a later session, for the comparison with
+# probe 15): the same command with --road straight-pixels-fi8-rows --final-validation-episodes 200 (no retraining;
+# results.json and table.md here are that command's).
