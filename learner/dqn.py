@@ -196,6 +196,9 @@ class DoubleDQN:
         self.updates = 0
         # The factor on both imitation losses (learner.imitation_final's schedule, set by the loop).
         self.imitation_scale = 1.0
+        # Whether an update trains the TD loss (the loop turns it off for phase 1 with
+        # learner.phase1_td=false: the imitation losses alone).
+        self.td_loss = True
         self._last: _UpdateRecord | None = None
         self.reset_optimizer()
 
@@ -282,6 +285,8 @@ class DoubleDQN:
         return _tensor(rows, torch.float32, self.device)
 
     def update(self, batch: Mapping[str, np.ndarray]) -> UpdateMetrics:
+        if not self.td_loss:
+            return self._imitation_update(batch)
         cfg, dev = self.cfg, self.device
         obs = _tensor(batch["obs"], _obs_dtype(batch["obs"]), dev)
         next_obs = _tensor(batch["next_obs"], _obs_dtype(batch["next_obs"]), dev)
@@ -318,27 +323,56 @@ class DoubleDQN:
                 td_target = td_target + self._terminal_value(batch["steps"], batch["terminated"])
         huber = F.huber_loss(q, td_target, reduction="none", delta=cfg.huber_delta)
         loss = (huber * _tensor(weight, torch.float32, dev)).mean() if weight is not None else huber.mean()
-        margin_loss = bc_loss = q.new_zeros(())
-        demo_np = batch.get("is_demo")
-        margin_weight = cfg.margin_loss_weight * self.imitation_scale
-        bc_weight = cfg.bc_loss_weight * self.imitation_scale
-        if demo_np is not None and (margin_weight > 0 or bc_weight > 0) and np.any(demo_np):
+        margin_loss, bc_loss = self._imitation_losses(q_all, action, batch.get("is_demo"))
+        loss = loss + cfg.margin_loss_weight * self.imitation_scale * margin_loss \
+            + cfg.bc_loss_weight * self.imitation_scale * bc_loss
+        return self._step(loss, q, td_target, margin_loss, bc_loss)
+
+    def _imitation_losses(self, q_all: torch.Tensor, action: torch.Tensor,
+                          demo_np: np.ndarray | None) -> tuple[torch.Tensor, torch.Tensor]:
+        """(margin loss, cross-entropy) on the batch's demo rows; 0 for a loss whose weight is 0 or
+        when no row is a demo row."""
+        cfg, dev = self.cfg, self.device
+        margin_loss = bc_loss = q_all.new_zeros(())
+        margin_on = cfg.margin_loss_weight * self.imitation_scale > 0
+        bc_on = cfg.bc_loss_weight * self.imitation_scale > 0
+        if demo_np is not None and (margin_on or bc_on) and np.any(demo_np):
             demo = _tensor(np.asarray(demo_np) != 0, torch.bool, dev)
             qd, ad = q_all[demo], action[demo]
-            if margin_weight > 0:
+            if margin_on:
                 # DQfD: on demo rows the demonstrator's action must beat every other by `margin`.
                 penalty = torch.full_like(qd, cfg.margin)
                 penalty.scatter_(1, ad[:, None], 0.0)
-                margin_loss = ((qd + penalty).max(dim=1).values - q[demo]).mean()
-                loss = loss + margin_weight * margin_loss
-            if bc_weight > 0:
+                margin_loss = ((qd + penalty).max(dim=1).values - qd.gather(1, ad[:, None]).squeeze(1)).mean()
+            if bc_on:
                 # Supervised imitation: cross-entropy of softmax(Q(s, .)) against the demonstrator's
                 # action on demo rows. Unlike the margin (a fixed 0.8 at Q-values near 100), it keeps
                 # pushing until the demo action clearly leads, which is what makes the small action
                 # gaps of 10 Hz control follow the demonstrator (docs/results-history.md, round 2).
                 bc_loss = F.cross_entropy(qd, ad)
-                loss = loss + bc_weight * bc_loss
+        return margin_loss, bc_loss
 
+    def _imitation_update(self, batch: Mapping[str, np.ndarray]) -> UpdateMetrics:
+        """One update of the imitation losses alone (phase 1 with learner.phase1_td=false): one
+        pass over the observations, none over the next ones or the target network. Its record's TD
+        target is Q(s, a) itself, so its |TD error| reads 0 (no priorities: the config refuses the
+        prioritized sampler with it)."""
+        cfg, dev = self.cfg, self.device
+        obs = _tensor(batch["obs"], _obs_dtype(batch["obs"]), dev)
+        action = _tensor(batch["action"], torch.int64, dev)
+        if self._augment_gen is not None:
+            obs = random_shift(obs, cfg.augment_pad, self._augment_gen)
+        q_all = self.online(obs)
+        q = q_all.gather(1, action[:, None]).squeeze(1)
+        margin_loss, bc_loss = self._imitation_losses(q_all, action, batch.get("is_demo"))
+        loss = cfg.margin_loss_weight * self.imitation_scale * margin_loss \
+            + cfg.bc_loss_weight * self.imitation_scale * bc_loss
+        return self._step(loss, q, q.detach(), margin_loss, bc_loss)
+
+    def _step(self, loss: torch.Tensor, q: torch.Tensor, td_target: torch.Tensor, margin_loss: torch.Tensor,
+              bc_loss: torch.Tensor) -> UpdateMetrics:
+        """The optimizer step on ``loss``, the weight average, the target's refresh, the record."""
+        cfg = self.cfg
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         grad_norm = torch.nn.utils.clip_grad_norm_(self._params, cfg.grad_clip, foreach=True)

@@ -264,6 +264,27 @@ class Learner:
     def _rehearsal_phase1(self) -> None:
         print(f"learner: {self.cfg.replay.demo_mode} phase 1: {self.lcfg.phase1_updates} updates on demos only",
               flush=True)
+        if not self.lcfg.phase1_td:
+            print("learner: phase 1 trains the imitation losses alone (learner.phase1_td=false)", flush=True)
+        self.agent.td_loss = self.lcfg.phase1_td
+        try:
+            self._phase1_updates()
+        finally:
+            self.agent.td_loss = True
+        if self.stop.is_set():
+            return
+        self.checkpoint("phase1")
+        if not self._set_replay_phase(2):
+            return
+        # Phase 2: a new training run whose initial value is the phase-1 network.
+        self.agent.reset_optimizer()
+        self.phase, self.version = 2, self.version + 1
+        self.publish()
+        print(f"learner: {self.cfg.replay.demo_mode} phase 2 from the phase-1 network (version {self.version})",
+              flush=True)
+
+    def _phase1_updates(self) -> None:
+        """Phase 1's updates on the demo shard, until ``learner.phase1_updates`` or a stop."""
         next_log = time.monotonic()
         with phase1_cpus(self.lcfg.phase1_threads, self.agent.device) as widened:
             if widened:
@@ -288,17 +309,6 @@ class Learner:
                 if batch is not None:
                     self._updates(batch)
                 next_log = self._log_when_due(next_log)
-        if self.stop.is_set():
-            return
-        self.checkpoint("phase1")
-        if not self._set_replay_phase(2):
-            return
-        # Phase 2: a new training run whose initial value is the phase-1 network.
-        self.agent.reset_optimizer()
-        self.phase, self.version = 2, self.version + 1
-        self.publish()
-        print(f"learner: {self.cfg.replay.demo_mode} phase 2 from the phase-1 network (version {self.version})",
-              flush=True)
 
     def _set_replay_phase(self, phase: int) -> bool:
         while not self.links.set_phase(phase):

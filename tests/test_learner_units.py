@@ -456,6 +456,68 @@ def test_the_imitation_scale_weighs_both_imitation_losses_and_zero_leaves_the_td
     assert m_half["loss"] == pytest.approx(td + 0.5 * (m_whole["bc_loss"] + m_whole["margin_loss"]), rel=1e-5)
 
 
+def test_an_imitation_only_update_trains_the_imitation_losses_alone_and_never_reads_the_next_observations():
+    """learner.phase1_td=false's update (agent.td_loss off): the loss is the weighted imitation losses,
+    nothing else; the next observations and the target network play no part (NaN there changes nothing)."""
+    from laneshift.config import LearnerConfig
+    from laneshift.learner.dqn import DoubleDQN
+
+    rng = np.random.default_rng(4)
+    obs = rng.normal(size=(64, 4)).astype(np.float32)
+    expert = (obs[:, 2] > 0).astype(np.int64) * 2
+    batch = {"obs": obs, "action": expert, "reward": rng.normal(size=64).astype(np.float32),
+             "next_obs": np.full((64, 4), np.nan, np.float32), "terminated": np.zeros(64, np.uint8),
+             "steps": np.ones(64, np.uint8), "weight": np.ones(64, np.float32), "is_demo": np.ones(64, np.uint8)}
+    cfg = LearnerConfig(hidden=(32,), lr=1e-2, seed=5, dueling=True, margin_loss_weight=0.5, bc_loss_weight=2.0,
+                        target_update_period=1000)
+    agent = DoubleDQN((4,), 3, cfg)
+    target_before = [p.clone() for p in agent.target.parameters()]
+    agent.td_loss = False
+    for _ in range(200):
+        metrics = agent.update(batch)
+    assert math.isfinite(metrics["loss"]) and metrics["td_abs"] == 0.0
+    assert metrics["loss"] == pytest.approx(0.5 * metrics["margin_loss"] + 2.0 * metrics["bc_loss"], rel=1e-5)
+    assert (agent.greedy(obs) == expert).mean() == 1.0
+    assert agent.updates == 200 and all(torch.equal(a, b) for a, b in zip(agent.target.parameters(), target_before))
+    # The same agent with the TD loss back on reads the next observations again (here: NaN).
+    agent.td_loss = True
+    assert math.isnan(agent.update(batch)["loss"])
+
+
+def test_the_full_update_is_unchanged_by_the_imitation_losses_refactor():
+    """TD + imitation: the loss is the TD loss plus each weighted imitation loss (the figures an
+    imitation-only update of the same batch gives for the imitation part)."""
+    from laneshift.config import LearnerConfig
+    from laneshift.learner.dqn import DoubleDQN
+
+    rng = np.random.default_rng(6)
+    obs = rng.normal(size=(32, 4)).astype(np.float32)
+    batch = {"obs": obs, "action": rng.integers(0, 3, 32), "reward": rng.normal(size=32).astype(np.float32),
+             "next_obs": rng.normal(size=(32, 4)).astype(np.float32), "terminated": np.zeros(32, np.uint8),
+             "steps": np.ones(32, np.uint8), "weight": np.ones(32, np.float32),
+             "is_demo": (np.arange(32) % 2).astype(np.uint8)}
+    cfg = LearnerConfig(hidden=(16,), seed=7, margin_loss_weight=1.0, bc_loss_weight=3.0)
+    full, imitation = DoubleDQN((4,), 3, cfg), DoubleDQN((4,), 3, cfg)
+    imitation.td_loss = False
+    m_full, m_imitation = full.update(batch), imitation.update(batch)
+    assert (m_full["margin_loss"], m_full["bc_loss"]) == (m_imitation["margin_loss"], m_imitation["bc_loss"])
+    assert m_full["margin_loss"] > 0 and m_full["bc_loss"] > 0
+    assert m_full["loss"] > m_imitation["loss"] == pytest.approx(m_full["margin_loss"] + 3.0 * m_full["bc_loss"],
+                                                                 rel=1e-5)
+
+
+def test_phase1_td_false_needs_an_imitation_loss_and_the_uniform_sampler():
+    from laneshift.config import ConfigError, LearnerConfig, ReplayConfig, RunConfig
+
+    with pytest.raises(ConfigError, match="learner.phase1_td"):
+        LearnerConfig(phase1_td=False)
+    assert not LearnerConfig(phase1_td=False, bc_loss_weight=1.0).phase1_td
+    learner = LearnerConfig(phase1_td=False, bc_loss_weight=1.0)
+    with pytest.raises(ConfigError, match="learner.phase1_td.*prioritized"):
+        RunConfig(learner=learner, replay=ReplayConfig(sampler="prioritized"))
+    assert RunConfig(learner=learner).learner.phase1_td is False
+
+
 def test_heads_per_road_checkpoints_load_back_with_their_heads(tmp_path):
     from laneshift.tools.studies.evaluate import load_greedy_policy
     from laneshift.qnet import build_q_network

@@ -237,6 +237,37 @@ def test_rehearsal_phase1_logs_under_pretrain_at_update_steps(tmp_path):
     assert not any(t.startswith("learner/") for t in acc.Tags()["scalars"])
 
 
+class _DemoLinks(FakeLinks):
+    """Demo rows whose next observations are NaN, and the agent's td_loss recorded at each sample."""
+
+    def __init__(self, learner_ref: list):
+        super().__init__()
+        self.learner_ref, self.td_loss_seen = learner_ref, []
+
+    def sample(self, req: wire.SampleRequest) -> wire.SampledBatch:
+        if self.learner_ref:
+            self.td_loss_seen.append(self.learner_ref[0].agent.td_loss)
+        batch = super().sample(req)
+        n = len(batch.action)
+        return dataclasses.replace(batch, next_obs=np.full((n, *OBS), np.nan, np.float32), is_demo=np.ones(n, np.uint8))
+
+
+def test_phase1_with_phase1_td_false_trains_the_imitation_alone_then_phase2_learns_with_td(tmp_path):
+    holder: list = []
+    links = _DemoLinks(holder)
+    learner = _learner(tmp_path, links, **{"replay.demo_mode": "rehearsal", "learner.phase1_updates": 40,
+                                           "learner.bc_loss_weight": 1.0, "learner.phase1_td": False})
+    holder.append(learner)
+    learner._rehearsal_phase1()
+    # The NaN next observations never reached an update: the network stayed finite.
+    assert learner.agent.updates == 40 and learner.phase == 2
+    assert all(torch.isfinite(p).all() for p in learner.agent.online.parameters())
+    assert links.td_loss_seen and not any(links.td_loss_seen)
+    assert learner.agent.td_loss  # phase 2 trains the TD loss again
+    assert (tmp_path / "checkpoints" / "phase1.safetensors").is_file()
+    learner.metrics.close()
+
+
 def _episodes_of(env_cfg: EnvConfig, episodes: int):
     """The EvaluatePolicy the builder hands the learner: ``episodes`` greedy episodes on the env."""
     from laneshift.actors.evaluation import GreedyPolicy, evaluate_policy

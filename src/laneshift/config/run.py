@@ -186,6 +186,10 @@ class RunConfig:
             raise ConfigError(f"learner.heads: one head per road takes env.scenario=allroads and "
                               f"{len(ROADS)} heads (one per road, picked by the observation's road one-hot), "
                               f"got {self.learner.heads!r} on scenario {self.env.scenario!r}")
+        if not self.learner.phase1_td and self.replay.sampler == "prioritized":
+            # An imitation-only update has no TD error to give the demo rows as their priority.
+            raise ConfigError("learner.phase1_td: false has no TD errors for replay.sampler=prioritized's priorities "
+                              "in phase 1; use the uniform sampler, or keep learner.phase1_td true")
         if self.train.parallel == "sync" and self.learner.n_step > self.actor.send_every:
             # A sync round needs a batch from every worker; its first n - 1 steps complete no item.
             raise ConfigError(f"learner.n_step: must be <= actor.send_every ({self.actor.send_every}) in sync mode, "

@@ -389,6 +389,13 @@ class LearnerConfig:
     publish_every: int = 50  # updates between weight broadcasts (async)
     updates_per_round: int = 8  # sync: updates per round of worker batches
     phase1_updates: int = 2_000  # rehearsal: demo-only updates before phase 2
+    # Whether phase 1 (the pre-training on the demo shard) trains the TD loss beside the imitation
+    # losses (DQfD's pre-training). False: the imitation losses alone (margin_loss_weight and
+    # bc_loss_weight; one of them must be on), an update without the passes over the next
+    # observations and the target network; phase 2 then learns the values with the imitation kept.
+    # On frames a copy trained by cross-entropy alone drove far better than DQfD's pre-training
+    # (docs/RESULTS.md, pixels).
+    phase1_td: bool = True
     checkpoint_every: int = 5_000  # updates between checkpoints in the run dir
     # Full training state (online + target nets, optimizer, update count, weights version) written
     # at least this often, so a restarted learner loses at most this much work. 0 = only at stop.
@@ -456,6 +463,10 @@ class LearnerConfig:
         _check(not isinstance(self.imitation_fade_steps, bool) and isinstance(self.imitation_fade_steps, int)
                and self.imitation_fade_steps >= 0, "learner.imitation_fade_steps", "must be an int >= 0 (0 = the budget)",
                self.imitation_fade_steps)
+        _check(isinstance(self.phase1_td, bool), "learner.phase1_td", "must be true or false", self.phase1_td)
+        _check(self.phase1_td or self.margin_loss_weight > 0 or self.bc_loss_weight > 0, "learner.phase1_td",
+               "false leaves phase 1 no loss unless learner.bc_loss_weight or learner.margin_loss_weight is > 0",
+               self.phase1_td)
         _check(self.seed >= 0, "learner.seed", "must be >= 0", self.seed)
         _check(self.checkpoint_every_s >= 0, "learner.checkpoint_every_s", "must be >= 0", self.checkpoint_every_s)
         _check(self.log_every_s > 0, "learner.log_every_s", "must be > 0", self.log_every_s)
