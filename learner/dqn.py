@@ -323,34 +323,34 @@ class DoubleDQN:
                 td_target = td_target + self._terminal_value(batch["steps"], batch["terminated"])
         huber = F.huber_loss(q, td_target, reduction="none", delta=cfg.huber_delta)
         loss = (huber * _tensor(weight, torch.float32, dev)).mean() if weight is not None else huber.mean()
-        margin_loss, bc_loss = self._imitation_losses(q_all, action, batch.get("is_demo"))
-        loss = loss + cfg.margin_loss_weight * self.imitation_scale * margin_loss \
-            + cfg.bc_loss_weight * self.imitation_scale * bc_loss
+        loss, margin_loss, bc_loss = self._add_imitation(loss, q_all, action, batch.get("is_demo"))
         return self._step(loss, q, td_target, margin_loss, bc_loss)
 
-    def _imitation_losses(self, q_all: torch.Tensor, action: torch.Tensor,
-                          demo_np: np.ndarray | None) -> tuple[torch.Tensor, torch.Tensor]:
-        """(margin loss, cross-entropy) on the batch's demo rows; 0 for a loss whose weight is 0 or
-        when no row is a demo row."""
+    def _add_imitation(self, loss: torch.Tensor, q_all: torch.Tensor, action: torch.Tensor,
+                       demo_np: np.ndarray | None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``loss`` plus the weighted imitation losses on the batch's demo rows, and the two losses
+        (margin, cross-entropy) unweighted: 0 for one whose weight is 0, or when no row is a demo row."""
         cfg, dev = self.cfg, self.device
         margin_loss = bc_loss = q_all.new_zeros(())
-        margin_on = cfg.margin_loss_weight * self.imitation_scale > 0
-        bc_on = cfg.bc_loss_weight * self.imitation_scale > 0
-        if demo_np is not None and (margin_on or bc_on) and np.any(demo_np):
+        margin_weight = cfg.margin_loss_weight * self.imitation_scale
+        bc_weight = cfg.bc_loss_weight * self.imitation_scale
+        if demo_np is not None and (margin_weight > 0 or bc_weight > 0) and np.any(demo_np):
             demo = _tensor(np.asarray(demo_np) != 0, torch.bool, dev)
             qd, ad = q_all[demo], action[demo]
-            if margin_on:
+            if margin_weight > 0:
                 # DQfD: on demo rows the demonstrator's action must beat every other by `margin`.
                 penalty = torch.full_like(qd, cfg.margin)
                 penalty.scatter_(1, ad[:, None], 0.0)
                 margin_loss = ((qd + penalty).max(dim=1).values - qd.gather(1, ad[:, None]).squeeze(1)).mean()
-            if bc_on:
+                loss = loss + margin_weight * margin_loss
+            if bc_weight > 0:
                 # Supervised imitation: cross-entropy of softmax(Q(s, .)) against the demonstrator's
                 # action on demo rows. Unlike the margin (a fixed 0.8 at Q-values near 100), it keeps
                 # pushing until the demo action clearly leads, which is what makes the small action
                 # gaps of 10 Hz control follow the demonstrator (docs/results-history.md, round 2).
                 bc_loss = F.cross_entropy(qd, ad)
-        return margin_loss, bc_loss
+                loss = loss + bc_weight * bc_loss
+        return loss, margin_loss, bc_loss
 
     def _imitation_update(self, batch: Mapping[str, np.ndarray]) -> UpdateMetrics:
         """One update of the imitation losses alone (phase 1 with learner.phase1_td=false): one
@@ -364,9 +364,7 @@ class DoubleDQN:
             obs = random_shift(obs, cfg.augment_pad, self._augment_gen)
         q_all = self.online(obs)
         q = q_all.gather(1, action[:, None]).squeeze(1)
-        margin_loss, bc_loss = self._imitation_losses(q_all, action, batch.get("is_demo"))
-        loss = cfg.margin_loss_weight * self.imitation_scale * margin_loss \
-            + cfg.bc_loss_weight * self.imitation_scale * bc_loss
+        loss, margin_loss, bc_loss = self._add_imitation(q_all.new_zeros(()), q_all, action, batch.get("is_demo"))
         return self._step(loss, q, q.detach(), margin_loss, bc_loss)
 
     def _step(self, loss: torch.Tensor, q: torch.Tensor, td_target: torch.Tensor, margin_loss: torch.Tensor,
