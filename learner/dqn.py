@@ -199,6 +199,8 @@ class DoubleDQN:
         # Whether an update trains the TD loss (the loop turns it off for phase 1 with
         # learner.phase1_td=false: the imitation losses alone).
         self.td_loss = True
+        # Whether learner.frozen_layers are frozen (learner.frozen_steps' schedule, set by the loop).
+        self.frozen = False
         self._last: _UpdateRecord | None = None
         self.reset_optimizer()
 
@@ -253,6 +255,22 @@ class DoubleDQN:
         if _ADAM_IMPL == "fused" and _fused_ok(self.device):
             return {"fused": True, "foreach": None}
         return {"fused": None, "foreach": _ADAM_IMPL == "foreach"}
+
+    def set_frozen(self, frozen: bool) -> None:
+        """Freeze or thaw the online frame network's ``learner.frozen_layers`` (``learner.frozen_steps``):
+        frozen, they get no gradient, so backward stops at the layers after them, Adam and the weight
+        decay skip them (their gradients are None) and the gradient norm is the rest's."""
+        net = self.online
+        if not hasattr(net, "features"):
+            raise ValueError("learner.frozen_steps: the network has no frame layers to freeze (a vector MLP)")
+        if frozen == self.frozen:
+            return
+        if self.cfg.frozen_layers == "convolutions":
+            net.features.requires_grad_(not frozen)
+        else:  # all-but-output: everything, then the output layer (the dueling head's or the plain one) back on
+            net.requires_grad_(not frozen)
+            net.head[-1].requires_grad_(True)
+        self.frozen = frozen
 
     @property
     def last_td_abs_tensor(self) -> torch.Tensor | None:

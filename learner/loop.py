@@ -279,6 +279,7 @@ class Learner:
         # Phase 2: a new training run whose initial value is the phase-1 network.
         self.agent.reset_optimizer()
         self.phase, self.version = 2, self.version + 1
+        self._follow_schedules()  # phase 2's schedules (learner.frozen_steps) from its first update
         self.publish()
         print(f"learner: {self.cfg.replay.demo_mode} phase 2 from the phase-1 network (version {self.version})",
               flush=True)
@@ -328,12 +329,15 @@ class Learner:
 
     def _follow_schedules(self) -> None:
         """``learner.lr_final`` and ``learner.imitation_final``: the step size and the imitation
-        losses' weight fall linearly with the run's env steps (read once per log interval, the first
-        one at the loop's start, so a restored learner takes up its place at once; pre-training,
-        which has no env steps, keeps both whole)."""
+        losses' weight fall linearly with the run's env steps; ``learner.frozen_steps``: the
+        frozen layers stay frozen until the run's env steps reach it (read once per log interval, the
+        first one at the loop's start and at phase 2's, so a restored learner takes up its place at
+        once; pre-training, which has no env steps, keeps both weights whole and trains everything)."""
         if self.phase == 1:
             return
         lcfg = self.lcfg
+        if lcfg.frozen_steps:
+            self.agent.set_frozen(self.env_steps < lcfg.frozen_steps)
         if lcfg.lr_final:
             self.agent.set_lr(linear_schedule(lcfg.lr, lcfg.lr_final, self.env_steps, self.cfg.train.env_steps))
         if lcfg.imitation_final < 1.0:

@@ -190,6 +190,10 @@ class RunConfig:
             # An imitation-only update has no TD error to give the demo rows as their priority.
             raise ConfigError("learner.phase1_td: false has no TD errors for replay.sampler=prioritized's priorities "
                               "in phase 1; use the uniform sampler, or keep learner.phase1_td true")
+        if self.learner.frozen_steps and self.env.observation != "grayscale":
+            raise ConfigError(f"learner.frozen_steps: freezes a frame network's layers, so it needs "
+                              f"env.observation=grayscale, got {self.learner.frozen_steps!r} on "
+                              f"env.observation={self.env.observation!r}")
         if self.train.parallel == "sync" and self.learner.n_step > self.actor.send_every:
             # A sync round needs a batch from every worker; its first n - 1 steps complete no item.
             raise ConfigError(f"learner.n_step: must be <= actor.send_every ({self.actor.send_every}) in sync mode, "

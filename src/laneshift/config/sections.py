@@ -396,6 +396,18 @@ class LearnerConfig:
     # On frames a copy trained by cross-entropy alone drove far better than DQfD's pre-training
     # (docs/RESULTS.md, pixels).
     phase1_td: bool = True
+    # The first N env steps of phase 2 keep some of a frame network's layers at their pre-trained
+    # (phase-1) weights and train the rest (learner.frozen_layers): linear probing, then fine-tuning
+    # (Kumar et al. 2022, LP-FT: an output layer that does not yet fit the new loss distorts the
+    # pre-trained features when everything is tuned at once). On frames, phase 2's TD loss took the
+    # Q-values from the imitation's scale (about 0) to returns' (about 140) in 8,000 updates, at 20-35
+    # times phase 1's gradient norm, and the pre-trained copy's driving went with them (docs/RESULTS.md,
+    # pixels). 0 = nothing frozen; train.env_steps or more = the whole run. Frame observations
+    # (env.observation=grayscale) only.
+    frozen_steps: int = 0
+    # What learner.frozen_steps freezes: all-but-output (every layer but the Q output layer, the dueling
+    # head's value and advantage layers: linear probing) | convolutions (the CNN's layers only).
+    frozen_layers: Literal["all-but-output", "convolutions"] = "all-but-output"
     checkpoint_every: int = 5_000  # updates between checkpoints in the run dir
     # Full training state (online + target nets, optimizer, update count, weights version) written
     # at least this often, so a restarted learner loses at most this much work. 0 = only at stop.
@@ -467,6 +479,9 @@ class LearnerConfig:
         _check(self.phase1_td or self.margin_loss_weight > 0 or self.bc_loss_weight > 0, "learner.phase1_td",
                "false leaves phase 1 no loss unless learner.bc_loss_weight or learner.margin_loss_weight is > 0",
                self.phase1_td)
+        _check(not isinstance(self.frozen_steps, bool) and isinstance(self.frozen_steps, int)
+               and self.frozen_steps >= 0, "learner.frozen_steps", "must be an int >= 0 (0 = nothing frozen)",
+               self.frozen_steps)
         _check(self.seed >= 0, "learner.seed", "must be >= 0", self.seed)
         _check(self.checkpoint_every_s >= 0, "learner.checkpoint_every_s", "must be >= 0", self.checkpoint_every_s)
         _check(self.log_every_s > 0, "learner.log_every_s", "must be > 0", self.log_every_s)
