@@ -7,11 +7,14 @@ with the option's name.
 
 In process, no Ray, no zenoh: DoubleDQN on random frames, and a Learner over fake links that hand
 out random frame batches and report the env steps.
-Room: tests, unit. May import: laneshift (any floor), pytest, numpy, torch, the standard library."""
+Room: tests, unit. May import: laneshift (any floor), pytest, numpy, torch, the standard library, tests/fakelinks.py."""
 
 from __future__ import annotations
 
+import importlib.util
+import sys
 import threading
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,6 +25,12 @@ from laneshift.config import ConfigError, LearnerConfig, load_run_config
 from laneshift.envspec import EnvSpec
 from laneshift.learner.dqn import DoubleDQN
 from laneshift.learner.loop import Learner
+
+# tests/ is not a package and pytest runs with --import-mode=importlib: load the helper by path.
+_spec = importlib.util.spec_from_file_location("laneshift_tests_fakelinks", Path(__file__).with_name("fakelinks.py"))
+fakelinks = importlib.util.module_from_spec(_spec)
+sys.modules[_spec.name] = fakelinks
+_spec.loader.exec_module(fakelinks)
 
 torch.set_num_threads(1)
 FRAMES, ACTIONS = (4, 40, 40), 3
@@ -87,10 +96,11 @@ def test_a_vector_network_or_a_bad_count_is_refused_with_the_options_name():
     assert cfg.learner.frozen_steps == 1000 and cfg.learner.frozen_layers == "all-but-output"
 
 
-class FrameLinks:
+class FrameLinks(fakelinks.QuietLinks):
     """LearnerLinks whose replay server hands out random demo frame batches and reports ``env_steps``."""
 
     def __init__(self) -> None:
+        super().__init__()
         self.env_steps, self.rng = 0, np.random.default_rng(3)
 
     def sample(self, req: wire.SampleRequest) -> wire.SampledBatch:
@@ -105,27 +115,6 @@ class FrameLinks:
                 "actors_total": {"env_steps": self.env_steps, "lost_items": 0},
                 "rates": {"inserts_per_s": 10.0, "samples_per_s": 80.0}, "demo_share_buffer": 1.0,
                 "demo_share_recent_samples": 1.0, "sampled_rows": 0}
-
-    def set_phase(self, phase: int) -> bool:
-        return True
-
-    def publish_weights(self, weights: wire.Weights) -> None:
-        pass
-
-    def send_priorities(self, update: wire.PriorityUpdate) -> None:
-        pass
-
-    def publish_stats(self, status, final: bool = False) -> None:
-        pass
-
-    def take_episodes(self) -> list:
-        return []
-
-    def stop_requested(self) -> bool:
-        return False
-
-    def stop_all(self) -> None:
-        pass
 
 
 def _learner(run_dir, links: FrameLinks, **overrides) -> Learner:

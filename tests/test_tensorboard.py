@@ -4,15 +4,19 @@ during training (``train.eval_every``) on the LKA plant.
 
 In process, no Ray, no zenoh: a Learner over fake links fed synthetic batches and episode
 records, event files read back with TensorBoard's own reader.
-Room: tests, unit. May import: the learner, the contract, the in-process runner, tensorboard's event reader.
+Room: tests, unit. May import: the learner, the contract, the in-process runner, tensorboard's event reader,
+tests/fakelinks.py.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import importlib.util
 import json
+import sys
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -30,6 +34,12 @@ from laneshift.qnet import build_q_network
 
 event_accumulator = pytest.importorskip("tensorboard.backend.event_processing.event_accumulator")
 
+# tests/ is not a package and pytest runs with --import-mode=importlib: load the helper by path.
+_spec = importlib.util.spec_from_file_location("laneshift_tests_fakelinks", Path(__file__).with_name("fakelinks.py"))
+fakelinks = importlib.util.module_from_spec(_spec)
+sys.modules[_spec.name] = fakelinks
+_spec.loader.exec_module(fakelinks)
+
 torch.set_num_threads(1)
 
 OBS, ACTIONS = (4,), 3
@@ -38,11 +48,12 @@ SMALL = {"learner.hidden": "16", "learner.batch_size": 8, "learner.prefetch": 2,
          "learner.device": "cpu", "learner.checkpoint_every_s": 0}
 
 
-class FakeLinks:
+class FakeLinks(fakelinks.QuietLinks):
     """LearnerLinks with a replay server that hands out random batches and reports ``env_steps``."""
 
     def __init__(self, env_steps: int = 0):
-        self.env_steps, self.episodes, self.status = env_steps, [], {}
+        super().__init__()
+        self.env_steps, self.episodes = env_steps, []
         self.rng = np.random.default_rng(0)
         self.sampled = 0
 
@@ -63,27 +74,9 @@ class FakeLinks:
                 "rates": {"inserts_per_s": 10.0, "samples_per_s": 80.0}, "demo_share_buffer": 0.0,
                 "demo_share_recent_samples": 0.0, "sampled_rows": self.sampled}
 
-    def set_phase(self, phase: int) -> bool:
-        return True
-
-    def publish_weights(self, weights: wire.Weights) -> None:
-        pass
-
-    def send_priorities(self, update: wire.PriorityUpdate) -> None:
-        pass
-
-    def publish_stats(self, status: LearnerStatus, final: bool = False) -> None:
-        self.status = status.stats_message(final)
-
     def take_episodes(self) -> list[wire.EpisodeRecord | wire.WireError]:
         out, self.episodes = self.episodes, []
         return [read_record(payload) for payload in out]  # decoded, as the links hand them over
-
-    def stop_requested(self) -> bool:
-        return False
-
-    def stop_all(self) -> None:
-        pass
 
     def episode(self, actor: str, env_steps: int) -> None:
         self.episodes.append(wire.encode_json({"actor": actor, "return": -1.5, "length": 40, "crashed": False,
