@@ -1,5 +1,5 @@
 # Probe 18, run from a frozen worktree of revision 5399754 at /work/study-w25 (its paths below);
-# from a clone of main, drop the cd and run it in the repository root. Seeds 1 and 2: --seeds 1 2.
+# from a clone of main, drop the cd and run it in the repository root. Seeds 1 and 2: --seeds 0,1,2 (seed 0 is skipped when its json exists).
 # The protocol resumes an unfinished run with the same command.
 cd /work/study-w25
 .venv/bin/laneshift experiment protocol --scenario straight --method dqfd-bc-anneal --seeds 0 \
