@@ -403,8 +403,8 @@ class LearnerConfig:
     # mean Q-value from the imitation's -11 to 121 in 10,000 updates, at 30-40 times phase 1's gradient
     # norm, and the pre-trained copy's driving went with it; after that pre-training, all-but-output
     # for the whole run ended 15.5 and 7 points of validation achievement above the best recipe that
-    # trained every layer (docs/RESULTS.md, pixels, probes 14, 17 and 18). 0 = nothing frozen; train.env_steps or more = the whole run. Frame
-    # observations (env.observation=grayscale) only.
+    # trained every layer (docs/RESULTS.md, pixels, probes 14, 17 and 18). 0 = nothing frozen;
+    # train.env_steps or more = the whole run. Frame observations (env.observation=grayscale) only.
     frozen_steps: int = 0
     # What learner.frozen_steps freezes: all-but-output (every layer but the Q output layer, the dueling
     # head's value and advantage layers: linear probing) | convolutions (the CNN's layers only).
