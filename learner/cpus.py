@@ -23,7 +23,8 @@ from contextlib import contextmanager
 
 import torch
 
-from laneshift.cpus import node_cpus, set_thread_masks, thread_masks
+from laneshift.config import LearnerConfig
+from laneshift.cpus import has_bf16_instructions, node_cpus, set_thread_masks, thread_masks
 
 
 @contextmanager
@@ -51,3 +52,18 @@ def phase1_cpus(threads: int, device: torch.device) -> Iterator[str | None]:
     finally:
         torch.set_num_threads(threads_before)
         set_thread_masks(mask_before, masks=masks)
+
+
+def bf16_warning(cfg: LearnerConfig, device: torch.device, has_bf16: bool | None = None) -> str | None:
+    """One line for the log where ``learner.cnn_precision`` or ``learner.mlp_precision`` asks a CPU
+    learner for bfloat16 and the CPU has no bfloat16 instructions (``has_bf16``: None reads
+    /proc/cpuinfo); None otherwise. A warning, not a refusal: the config is valid, the machine that
+    runs the learner (in a cluster, not the one that checked the config) makes it slow."""
+    asked = [f"learner.{name}=bf16" for name in ("cnn_precision", "mlp_precision") if getattr(cfg, name) == "bf16"]
+    if not asked or device.type != "cpu":
+        return None
+    if (has_bf16_instructions() if has_bf16 is None else has_bf16) is not False:
+        return None
+    return (f"{' and '.join(asked)} on a CPU without bfloat16 instructions (no avx512_bf16, amx_bf16 or bf16 in "
+            f"/proc/cpuinfo): torch emulates them, several times slower than fp32 (SmallCNN at batch 32: 2.0 "
+            f"against 23.4 updates/s on an AMD EPYC without them); fp32 is the faster choice here")

@@ -45,7 +45,7 @@ from laneshift.envspec import RECORDED_ENV_OPTIONS, EnvSpec
 from laneshift.qnet import weights_of
 
 from .batches import MAX_REPLY_BYTES, batches_per_request, retry_delay, sample_or_wait, split_updates
-from .cpus import phase1_cpus
+from .cpus import bf16_warning, phase1_cpus
 from .dqn import METRIC_NAMES, DoubleDQN
 from .episodes import EpisodeStats
 from .metrics import MetricsLog
@@ -69,6 +69,8 @@ class Learner:
         self.links, self.stop = links, stop
         self.run_dir = Path(cfg.train.run_dir)
         self.agent = DoubleDQN(spec.schema.obs_shape, spec.schema.n_actions, cfg.learner)
+        if (slow := bf16_warning(cfg.learner, self.agent.device)) is not None:
+            print(f"learner: {slow}", flush=True)
         self.workers = worker_names(cfg.actor.workers)
         self.metrics = MetricsLog(self.run_dir)
         self.metrics.config(cfg.to_dict())

@@ -11,6 +11,7 @@ import json
 
 import torch
 
+from laneshift.cpus import has_bf16_instructions
 from laneshift.tools.bench import learner as bench_learner
 from laneshift.tools.cli import build_parser
 
@@ -25,6 +26,7 @@ def test_bench_learner_json_shape(capsys) -> None:
 
     assert out["device"] == "cpu" and out["device_name"] and out["torch"] == torch.__version__
     assert out["threads"] == 1 and out["rounds"] == 2 and out["cuda"] is None
+    assert out["cpu_bf16"] is has_bf16_instructions()  # the header says whether bf16 cases are emulated
     assert [c["name"] for c in out["cases"]] == [c.name for c in bench_learner.CASES]
     precision = {c["name"]: c["precision"] for c in out["cases"]}
     assert precision["small-b32-bf16"] == precision["mlp512-b256-bf16"] == "bf16" and precision["mlp-b256"] == "fp32"
@@ -39,10 +41,11 @@ def test_bench_learner_json_shape(capsys) -> None:
                     "small-b64": ("SmallCNN", [4, 100, 100], "uint8", 64),
                     "small-b32-bf16": ("SmallCNN", [4, 100, 100], "uint8", 32),
                     "small-b32-bf16-rows": ("SmallCNN", [4, 100, 100], "uint8", 32),
+                    "small-b32-rows": ("SmallCNN", [4, 100, 100], "uint8", 32),
                     "small-b128": ("SmallCNN", [4, 100, 100], "uint8", 128),
                     "small-b128-bf16": ("SmallCNN", [4, 100, 100], "uint8", 128)}
     rows = {c["name"]: c["rows"] for c in out["cases"]}  # learner.cnn_rows: the straight road's band
-    assert rows["small-b32-bf16-rows"] == "22:78" and rows["small-b32-bf16"] == ""
+    assert rows["small-b32-bf16-rows"] == rows["small-b32-rows"] == "22:78" and rows["small-b32-bf16"] == ""
     params = {c["name"]: c["params"] for c in out["cases"]}
     assert params["small-b32-bf16-rows"] < params["small-b32-bf16"] / 2
     hidden = {c["name"]: c["hidden"] for c in out["cases"]}

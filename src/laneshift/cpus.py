@@ -64,3 +64,26 @@ def node_cpus() -> set[int]:
     except (OSError, ValueError):
         pass
     return set(range(os.cpu_count() or 1))
+
+
+#: The /proc/cpuinfo flags of CPUs that multiply bfloat16 in hardware: x86 AVX512-BF16 or AMX-BF16
+#: (``flags``), Arm's BF16 extension (``Features``).
+BF16_FLAGS = frozenset({"avx512_bf16", "amx_bf16", "bf16"})
+
+
+def has_bf16_instructions(cpuinfo: str | None = None) -> bool | None:
+    """Whether this machine's CPUs have bfloat16 instructions, from ``/proc/cpuinfo`` (or the text
+    given); None where that cannot be told (no /proc/cpuinfo, no flags line). Without them torch
+    emulates bfloat16 in software: on an AMD EPYC without them SmallCNN's update at batch 32 ran at
+    2.0 against 23.4 updates/s in float32 (``laneshift bench learner``)."""
+    if cpuinfo is None:
+        try:
+            cpuinfo = Path("/proc/cpuinfo").read_text()
+        except OSError:
+            return None
+    flags: set[str] = set()
+    for line in cpuinfo.splitlines():
+        key, sep, value = line.partition(":")
+        if sep and key.strip() in ("flags", "Features"):
+            flags.update(value.split())
+    return bool(flags & BF16_FLAGS) if flags else None

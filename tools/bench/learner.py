@@ -52,6 +52,7 @@ from laneshift import wire
 # torch is imported inside the functions that measure: every `laneshift` command builds its parser
 # with this module's register(), and a module-level import cost each of them ~2 s.
 from laneshift.config import LearnerConfig
+from laneshift.cpus import has_bf16_instructions
 
 N_ACTIONS = 9
 
@@ -79,6 +80,7 @@ CASES = (
     Case("small-b64", (4, 100, 100), "uint8", 64, "small"),
     Case("small-b32-bf16", (4, 100, 100), "uint8", 32, "small", "bf16"),  # learner.cnn_precision=bf16
     Case("small-b32-bf16-rows", (4, 100, 100), "uint8", 32, "small", "bf16", rows="22:78"),  # learner.cnn_rows
+    Case("small-b32-rows", (4, 100, 100), "uint8", 32, "small", rows="22:78"),  # the same in float32
     Case("small-b128", (4, 100, 100), "uint8", 128, "small"),  # the GPU pixel study's batch
     Case("small-b128-bf16", (4, 100, 100), "uint8", 128, "small", "bf16"),
 )
@@ -315,6 +317,7 @@ def bench(device: str = "auto", *, seconds: float = 3.0, rounds: int = 2, warmup
                 torch.cuda.empty_cache()
         return {
             "device": dev.type, "device_name": device_name(dev), "torch": torch.__version__,
+            "cpu_bf16": has_bf16_instructions() if dev.type == "cpu" else None,
             "cuda": torch.version.cuda if dev.type == "cuda" else None, "threads": torch.get_num_threads(),
             "python": platform.python_version(), "seconds": seconds, "rounds": rounds, "warmup_s": warmup,
             "prefetch": cfg.prefetch, "hidden": list(cfg.hidden), "cases": out_cases}
@@ -323,7 +326,9 @@ def bench(device: str = "auto", *, seconds: float = 3.0, rounds: int = 2, warmup
 
 
 def format_result(r: dict) -> str:
-    head = (f"laneshift bench learner: {r['device']} ({r['device_name']}), torch {r['torch']}, "
+    bf16 = {True: ", bfloat16 instructions", False: ", no bfloat16 instructions (bf16 cases emulated)"}
+    head = (f"laneshift bench learner: {r['device']} ({r['device_name']}{bf16.get(r.get('cpu_bf16'), '')}), "
+            f"torch {r['torch']}, "
             f"{r['threads']} thread(s), {r['rounds']} rounds x {r['seconds']:g} s alternating, updates/s "
             f"(mean [min..max])")
     w = max([4, *(len(c["name"]) for c in r["cases"])])  # the case column fits the longest name

@@ -347,13 +347,15 @@ class LearnerConfig:
     # The learner's convolutions in bfloat16 (autocast; the parameters, the layers after the
     # convolutions and the loss stay float32): 1.57x the SmallCNN updates/s at batch 32 on the
     # dev machine's AMD EPYC, which has avx512_bf16 (`laneshift bench learner --cases small-b32,small-b32-bf16`).
-    # A CPU without bfloat16 instructions emulates them, slower than fp32. Acting stays float32.
+    # A CPU without bfloat16 instructions emulates them, far slower than fp32 (an AMD EPYC without
+    # avx512_bf16: 2.0 against 23.4 updates/s), and the learner says so in one line at its start
+    # (`laneshift bench learner` names the CPU's bfloat16 support in its header). Acting stays float32.
     cnn_precision: Literal["fp32", "bf16"] = "fp32"
     # The same for an MLP's hidden layers (vector observations; the head and the loss stay float32).
     # On the dev machine's Intel Xeon (AMX units multiply bfloat16 matrices) the update at batch 256
     # ran 1.77x as fast with 512 x 512 units (178 against 101 a second) and 1.20x with 256 x 256
     # (`laneshift bench learner --cases mlp-b256,mlp-b256-bf16,mlp512-b256,mlp512-b256-bf16`);
-    # without bfloat16 instructions it is slower than fp32.
+    # without bfloat16 instructions it is slower than fp32 (the learner's start says so in one line).
     mlp_precision: Literal["fp32", "bf16"] = "fp32"
     augment_pad: int = 4  # the largest shift of learner.augment=shift, in pixels
     target_update_period: int = 500  # updates between hard target-network syncs
