@@ -201,6 +201,9 @@ class DoubleDQN:
         self.td_loss = True
         # Whether learner.frozen_layers are frozen (learner.frozen_steps' schedule, set by the loop).
         self.frozen = False
+        # Frozen all-but-output with the target's trunk equal to the online one's: one trunk pass
+        # over next_obs serves both Double DQN's chooser and the target (``_shared_trunk_update``).
+        self.shared_trunk = False
         self._last: _UpdateRecord | None = None
         self.reset_optimizer()
 
@@ -213,6 +216,7 @@ class DoubleDQN:
         self.target.load_state_dict(self.online.state_dict())
         if self.averaged is not None:
             self.averaged.load_state_dict(self.online.state_dict())
+        self._check_shared_trunk()
 
     @property
     def policy_net(self) -> torch.nn.Module:
@@ -243,6 +247,7 @@ class DoubleDQN:
         self.target.load_state_dict(state["target"])
         if self.averaged is not None:  # a state saved without averaging restarts the average at online
             self.averaged.load_state_dict(state.get("averaged", state["online"]))
+        self._check_shared_trunk()
         self.optimizer.load_state_dict(state["optimizer"])
         # A saved param group carries its own foreach/fused flags (a state written before Adam's
         # implementation was chosen here has the for-loop's None): the implementation is this
@@ -271,6 +276,17 @@ class DoubleDQN:
             net.requires_grad_(not frozen)
             net.head[-1].requires_grad_(True)
         self.frozen = frozen
+        self._check_shared_trunk()
+
+    def _check_shared_trunk(self) -> None:
+        """Set ``shared_trunk``: frozen all-but-output (the online trunk no longer changes) under
+        Double DQN, and the target's trunk the same weights (it is from the first target sync on)."""
+        online, target = self.online, self.target
+        self.shared_trunk = bool(
+            self.frozen and self.cfg.frozen_layers == "all-but-output" and self.cfg.double
+            and hasattr(online, "trunk")
+            and all(torch.equal(a, b) for a, b in zip(online.head[:-1].parameters(), target.head[:-1].parameters()))
+            and all(torch.equal(a, b) for a, b in zip(online.features.parameters(), target.features.parameters())))
 
     @property
     def last_td_abs_tensor(self) -> torch.Tensor | None:
@@ -319,7 +335,17 @@ class DoubleDQN:
             next_obs = random_shift(next_obs, cfg.augment_pad, self._augment_gen)
 
         # Q(s, .) with grad; Double DQN's chooser Q_online(s', .) without.
-        if self.concat_online_pass:
+        if self.shared_trunk:
+            # Frozen all-but-output: the trunk (convolutions and hidden layer) without grad over obs
+            # and next_obs in one pass, and next_obs' features feed the online and the target output
+            # layers alike (the two trunks are equal): 2 trunk passes of the batch where the general
+            # path makes 3, the same Q-values.
+            with torch.no_grad():
+                h = self.online.trunk(torch.cat([obs, next_obs]))
+            q_all = self.online.output(h[:rows])
+            with torch.no_grad():
+                q_next_online, q_next_target = self.online.output(h[rows:]), self.target.output(h[rows:])
+        elif self.concat_online_pass:
             q_both = self.online(torch.cat([obs, next_obs]))
             q_all, q_next_online = q_both[:rows], q_both[rows:].detach()
         else:
@@ -327,7 +353,8 @@ class DoubleDQN:
             q_next_online = None
         q = q_all.gather(1, action[:, None]).squeeze(1)
         with torch.no_grad():
-            q_next_target = self.target(next_obs)
+            if not self.shared_trunk:
+                q_next_target = self.target(next_obs)
             if cfg.double:
                 # Double DQN: the online net picks the next action, the target net values it.
                 if q_next_online is None:
@@ -399,6 +426,8 @@ class DoubleDQN:
         self.updates += 1
         if self.updates % cfg.target_update_period == 0:
             self.target.load_state_dict(self.online.state_dict())
+            if self.frozen and not self.shared_trunk:
+                self._check_shared_trunk()
         # Per-item |TD error| (the new priorities when the replay samples by priority) and the
         # metrics are computed from these only when read.
         self._last = _UpdateRecord(q.detach(), td_target)

@@ -11,6 +11,7 @@ Room: tests, unit. May import: laneshift (any floor), pytest, numpy, torch, the 
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.util
 import sys
 import threading
@@ -79,6 +80,48 @@ def test_frozen_layers_keep_their_weights_while_the_rest_learn_then_thaw(layers,
     assert not any(_same(m, b) for m, b in zip(frozen, before_frozen))
     # The target network's parameters never take gradients, frozen or not.
     assert not any(p.requires_grad for p in agent.target.parameters())
+
+
+@pytest.mark.parametrize("dueling", [True, False])
+def test_frozen_all_but_output_shares_one_trunk_pass_and_learns_what_the_general_path_learns(dueling):
+    """Frozen all-but-output: the target's trunk equals the online one's, so next_obs' features serve
+    both output layers (2 trunk passes of the batch, not 3); the losses and the output layer's weights
+    after a few updates match the general path's to float rounding, target syncs included."""
+    cfg = LearnerConfig(cnn="small", batch_size=8, lr=1e-3, bc_loss_weight=1.0, dueling=dueling, seed=1,
+                        augment="shift", target_update_period=2)
+    shared, general = DoubleDQN(FRAMES, ACTIONS, cfg), DoubleDQN(FRAMES, ACTIONS, cfg)
+    general.load_state_dict(shared.state_dict())
+    for agent in (shared, general):
+        agent.set_frozen(True)
+    assert shared.shared_trunk
+    rng_a, rng_b = np.random.default_rng(0), np.random.default_rng(0)
+    for _ in range(5):
+        general.shared_trunk = False  # the path every other configuration takes (a sync re-checks it)
+        a, b = shared.update(_batch(8, rng_a)), general.update(_batch(8, rng_b))
+        assert shared.shared_trunk
+        assert a["loss"] == pytest.approx(b["loss"], rel=1e-5, abs=1e-6)
+    for p, q in zip(shared.online.head[-1].parameters(), general.online.head[-1].parameters()):
+        torch.testing.assert_close(p, q, rtol=1e-5, atol=1e-6)
+    shared.set_frozen(False)
+    assert not shared.shared_trunk
+
+
+def test_the_trunk_is_shared_only_once_the_target_holds_the_online_trunk():
+    cfg = LearnerConfig(cnn="small", batch_size=8, lr=1e-3, seed=1, target_update_period=3)
+    agent, rng = DoubleDQN(FRAMES, ACTIONS, cfg), np.random.default_rng(0)
+    agent.update(_batch(8, rng))  # the online trunk moves, the target's stays: they differ now
+    agent.set_frozen(True)
+    assert not agent.shared_trunk
+    agent.update(_batch(8, rng))
+    assert not agent.shared_trunk
+    agent.update(_batch(8, rng))  # the third update syncs the target: from here on the trunks are equal
+    assert agent.shared_trunk
+    conv = DoubleDQN(FRAMES, ACTIONS, dataclasses.replace(cfg, frozen_layers="convolutions"))
+    conv.set_frozen(True)
+    assert not conv.shared_trunk  # the hidden layer still learns: its trunk is not the target's
+    vanilla = DoubleDQN(FRAMES, ACTIONS, dataclasses.replace(cfg, double=False))
+    vanilla.set_frozen(True)
+    assert not vanilla.shared_trunk
 
 
 def test_a_vector_network_or_a_bad_count_is_refused_with_the_options_name():

@@ -141,6 +141,14 @@ class _FrameQNetwork(nn.Module):
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         return self.head(self.scaled_features(obs, fold=obs.device.type == "cpu").float())
 
+    def trunk(self, obs: torch.Tensor) -> torch.Tensor:
+        """Every layer but the Q output layer (``head[-1]``): ``forward(obs) == output(trunk(obs))``."""
+        return self.head[:-1](self.scaled_features(obs, fold=obs.device.type == "cpu").float())
+
+    def output(self, h: torch.Tensor) -> torch.Tensor:
+        """The Q output layer (the dueling head or the plain linear one) on ``trunk``'s output."""
+        return self.head[-1](h)
+
     def scaled_features(self, obs: torch.Tensor, fold: bool) -> torch.Tensor:
         """The convolutions' output for raw frames (0-255), computed as the layers over frames / 255.
 
