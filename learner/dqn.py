@@ -202,7 +202,7 @@ class DoubleDQN:
         # Whether learner.frozen_layers are frozen (learner.frozen_steps' schedule, set by the loop).
         self.frozen = False
         # Frozen all-but-output with the target's trunk equal to the online one's: one trunk pass
-        # over next_obs serves both Double DQN's chooser and the target (``_shared_trunk_update``).
+        # over next_obs serves both Double DQN's chooser and the target (``update``'s first branch).
         self.shared_trunk = False
         self._last: _UpdateRecord | None = None
         self.reset_optimizer()
@@ -339,7 +339,7 @@ class DoubleDQN:
             # Frozen all-but-output: the trunk (convolutions and hidden layer) without grad over obs
             # and next_obs in one pass, and next_obs' features feed the online and the target output
             # layers alike (the two trunks are equal): 2 trunk passes of the batch where the general
-            # path makes 3, the same Q-values.
+            # path makes 3, the same Q-values to float rounding.
             with torch.no_grad():
                 h = self.online.trunk(torch.cat([obs, next_obs]))
             q_all = self.online.output(h[:rows])
