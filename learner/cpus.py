@@ -54,15 +54,13 @@ def phase1_cpus(threads: int, device: torch.device) -> Iterator[str | None]:
         set_thread_masks(mask_before, masks=masks)
 
 
-def bf16_warning(cfg: LearnerConfig, device: torch.device, has_bf16: bool | None = None) -> str | None:
+def bf16_warning(cfg: LearnerConfig, device: torch.device) -> str | None:
     """One line for the log where ``learner.cnn_precision`` or ``learner.mlp_precision`` asks a CPU
-    learner for bfloat16 and the CPU has no bfloat16 instructions (``has_bf16``: None reads
-    /proc/cpuinfo); None otherwise. A warning, not a refusal: the config is valid, the machine that
-    runs the learner (in a cluster, not the one that checked the config) makes it slow."""
+    learner for bfloat16 and /proc/cpuinfo says the CPU has no bfloat16 instructions; None otherwise.
+    A warning, not a refusal: the config is valid, the machine that runs the learner (in a cluster,
+    not the one that checked the config) makes it slow."""
     asked = [f"learner.{name}=bf16" for name in ("cnn_precision", "mlp_precision") if getattr(cfg, name) == "bf16"]
-    if not asked or device.type != "cpu":
-        return None
-    if (has_bf16_instructions() if has_bf16 is None else has_bf16) is not False:
+    if not asked or device.type != "cpu" or has_bf16_instructions() is not False:
         return None
     return (f"{' and '.join(asked)} on a CPU without bfloat16 instructions (no avx512_bf16, amx_bf16 or bf16 in "
             f"/proc/cpuinfo): torch emulates them, several times slower than fp32 (SmallCNN at batch 32: 2.0 "

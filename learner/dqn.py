@@ -335,6 +335,7 @@ class DoubleDQN:
             next_obs = random_shift(next_obs, cfg.augment_pad, self._augment_gen)
 
         # Q(s, .) with grad; Double DQN's chooser Q_online(s', .) without.
+        q_next_target = None
         if self.shared_trunk:
             # Frozen all-but-output: the trunk (convolutions and hidden layer) without grad over obs
             # and next_obs in one pass, and next_obs' features feed the online and the target output
@@ -353,7 +354,7 @@ class DoubleDQN:
             q_next_online = None
         q = q_all.gather(1, action[:, None]).squeeze(1)
         with torch.no_grad():
-            if not self.shared_trunk:
+            if q_next_target is None:
                 q_next_target = self.target(next_obs)
             if cfg.double:
                 # Double DQN: the online net picks the next action, the target net values it.

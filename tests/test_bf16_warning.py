@@ -48,15 +48,17 @@ def test_this_machine_gives_an_answer_or_none():
 def test_the_warning_names_the_options_that_ask_for_bf16_and_only_where_the_cpu_lacks_it(monkeypatch):
     cpu, cuda = torch.device("cpu"), torch.device("cuda")
     both = LearnerConfig(cnn_precision="bf16", mlp_precision="bf16")
-    line = bf16_warning(both, cpu, has_bf16=False)
+    monkeypatch.setattr(learner_cpus, "has_bf16_instructions", lambda: False)
+    line = bf16_warning(both, cpu)
     assert line is not None and "learner.cnn_precision=bf16 and learner.mlp_precision=bf16" in line
     assert "fp32" in line and "\n" not in line
-    assert "learner.cnn_precision" not in bf16_warning(LearnerConfig(mlp_precision="bf16"), cpu, has_bf16=False)
-    assert bf16_warning(LearnerConfig(), cpu, has_bf16=False) is None  # fp32: nothing to say
-    assert bf16_warning(both, cpu, has_bf16=True) is None
+    assert "learner.cnn_precision" not in bf16_warning(LearnerConfig(mlp_precision="bf16"), cpu)
+    assert bf16_warning(LearnerConfig(), cpu) is None  # fp32: nothing to say
+    assert bf16_warning(both, cuda) is None  # a GPU learner: the CPU's flags do not matter
+    monkeypatch.setattr(learner_cpus, "has_bf16_instructions", lambda: True)
+    assert bf16_warning(both, cpu) is None
     monkeypatch.setattr(learner_cpus, "has_bf16_instructions", lambda: None)
     assert bf16_warning(both, cpu) is None  # /proc/cpuinfo cannot tell: no guess
-    assert bf16_warning(both, cuda, has_bf16=False) is None  # a GPU learner: the CPU's flags do not matter
 
 
 @pytest.mark.parametrize("has_bf16, warned", [(False, True), (True, False)])
