@@ -71,8 +71,9 @@ UPDATE_FIELDS = ("obs", "action", "reward", "next_obs", "terminated", "steps", "
 
 
 def split_updates(batch: wire.SampledBatch) -> list[dict[str, np.ndarray]]:
-    """The batch's ``num_batches`` update batches: row slices (views, no copies) of each field."""
-    fields = {k: getattr(batch, k) for k in UPDATE_FIELDS}
+    """The batch's ``num_batches`` update batches: row slices (views, no copies) of each field
+    (no ``next_obs`` where the batch has none: a SampleRequest with next_obs=False)."""
+    fields = {k: getattr(batch, k) for k in UPDATE_FIELDS if getattr(batch, k) is not None}
     rows, rest = divmod(len(batch.action), batch.num_batches)
     if rest:
         raise ValueError(f"{len(batch.action)} rows do not split into {batch.num_batches} batches")

@@ -321,6 +321,9 @@ class DoubleDQN:
     def update(self, batch: Mapping[str, np.ndarray]) -> UpdateMetrics:
         if not self.td_loss:
             return self._imitation_update(batch)
+        if "next_obs" not in batch:
+            raise ValueError("DoubleDQN.update: the TD loss needs next_obs, and this batch was sampled without "
+                             "(wire.SampleRequest(next_obs=False) is for updates of the imitation losses alone)")
         cfg, dev = self.cfg, self.device
         obs = _tensor(batch["obs"], _obs_dtype(batch["obs"]), dev)
         next_obs = _tensor(batch["next_obs"], _obs_dtype(batch["next_obs"]), dev)

@@ -294,7 +294,8 @@ class Learner:
                 print(f"learner: {widened}", flush=True)
             # Whole requests with the next one in flight (prefetch.py), as in phase 2: the round trip
             # and the decode overlap the updates (1.13-1.18x the updates/s; docs/performance-log.md).
-            request = wire.SampleRequest(self.lcfg.batch_size, self.per_request)
+            # The imitation losses alone read no next observations: the replies leave them out.
+            request = wire.SampleRequest(self.lcfg.batch_size, self.per_request, next_obs=self.lcfg.phase1_td)
             ahead = Prefetcher(self.links.sample, lambda: request, self.stop)
             try:
                 while (self.agent.updates + self.per_request <= self.lcfg.phase1_updates
@@ -308,7 +309,9 @@ class Learner:
             # The last updates (fewer than one request's) are asked for exactly.
             while self.agent.updates < self.lcfg.phase1_updates and not self._should_stop():
                 n = self.lcfg.phase1_updates - self.agent.updates
-                batch = sample_or_wait(self.links.sample, wire.SampleRequest(self.lcfg.batch_size, n), self.stop.wait)
+                batch = sample_or_wait(self.links.sample,
+                                       wire.SampleRequest(self.lcfg.batch_size, n, next_obs=self.lcfg.phase1_td),
+                                       self.stop.wait)
                 if batch is not None:
                     self._updates(batch)
                 next_log = self._log_when_due(next_log)

@@ -100,7 +100,7 @@ class ShardedReplay:
         rows = req.batch_size * req.num_batches
         counts = split_rows(rows, self._weights())
         asks = {i: wire.SampleRequest(c, 1, req.min_version,
-                                      tuple(a for a in req.actors if wire.shard_of(a, self.n) == i))
+                                      tuple(a for a in req.actors if wire.shard_of(a, self.n) == i), req.next_obs)
                 for i, c in enumerate(counts) if c > 0}
         # Every shard is asked before any reply is awaited, all from this thread: the replies come
         # in together while this thread waits, with no pool threads to wake or to take the GIL.
@@ -128,7 +128,8 @@ class ShardedReplay:
     def _merge(self, served: dict[int, wire.SampledBatch], rows: int, num_batches: int) -> wire.SampledBatch:
         parts = [(i, served[i]) for i in sorted(served)]
         cat = {name: np.concatenate([getattr(b, name) for _, b in parts])
-               for name in ("obs", "action", "reward", "next_obs", "terminated", "steps", "is_demo")}
+               for name in ("obs", "action", "reward", "next_obs", "terminated", "steps", "is_demo")
+               if all(getattr(b, name) is not None for _, b in parts)}  # next_obs: none where not asked for
         index = np.concatenate([b.index * self.n + i for i, b in parts])
         weight = np.concatenate([self._union_weights(i, b) for i, b in parts]).astype(np.float32)
         weight /= max(float(weight.max()), 1e-12)
@@ -136,8 +137,8 @@ class ShardedReplay:
         info = dict(parts[0][1].info)
         info["live"] = sum(int(b.info.get("live", 0)) for _, b in parts)
         info["shards"] = [i for i, _ in parts]
-        return wire.SampledBatch(**{k: v[order] for k, v in cat.items()}, index=index[order], weight=weight[order],
-                                 num_batches=num_batches, info=info)
+        return wire.SampledBatch(**{"next_obs": None, **{k: v[order] for k, v in cat.items()}}, index=index[order],
+                                 weight=weight[order], num_batches=num_batches, info=info)
 
     def _union_weights(self, shard: int, batch: wire.SampledBatch) -> np.ndarray:
         """Shard ``shard``'s importance weights as weights of one draw over every shard."""

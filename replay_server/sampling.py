@@ -45,7 +45,8 @@ class Sampling:
                 n_online = self.online.size
             drawn = self.selector.draw(self._rng, rows, n_demo, self.online.tail, n_online, self.online.capacity)
             is_demo = drawn.is_demo
-            batch = self._gather(is_demo, drawn.demo_rows, drawn.online_rows, req.num_batches, drawn.weight)
+            batch = self._gather(is_demo, drawn.demo_rows, drawn.online_rows, req.num_batches, drawn.weight,
+                                 req.next_obs)
             # How many items this draw was over (and, prioritized, their mass and the weights'
             # scale): a learner sampling several shards weighs each by these (learner/shards.py).
             batch.info["live"] = n_demo + n_online
@@ -62,7 +63,8 @@ class Sampling:
         return batch
 
     def _gather(self, is_demo: np.ndarray, demo_rows: np.ndarray, online_rows: np.ndarray, nb: int,
-                weight: np.ndarray) -> SampledBatch:
+                weight: np.ndarray, next_obs: bool = True) -> SampledBatch:
+        """The drawn rows' columns (``next_obs`` False: all but the next observations)."""
         n = is_demo.shape[0]
         index = np.empty(n, np.int64)
         info = {"phase": self.phase, "prioritized": self.prioritized}
@@ -73,7 +75,8 @@ class Sampling:
             picked = np.take(records, online_rows, mode="clip")
             _take(self.online.key, online_rows, index)
             return SampledBatch(obs=picked["obs"], action=picked["action"], reward=picked["reward"],
-                                next_obs=picked["next_obs"], terminated=picked["terminated"], steps=picked["steps"],
+                                next_obs=picked["next_obs"] if next_obs else None, terminated=picked["terminated"],
+                                steps=picked["steps"],
                                 is_demo=is_demo.view(np.uint8), index=index, weight=weight, num_batches=nb, info=info)
         out = {
             "obs": np.empty((n, *self.schema.obs_shape), self.schema.obs_dtype),
@@ -81,10 +84,16 @@ class Sampling:
             "action": np.empty(n, np.int64), "reward": np.empty(n, np.float32), "terminated": np.empty(n, np.uint8),
             "steps": np.empty(n, np.uint8),
         }
+        if not next_obs:
+            del out["next_obs"]
         if demo_rows.shape[0] == 0:  # all rows online (no demos sampled): gather straight into the outputs
             for name, arr in out.items():
                 _take(getattr(self.online, name), online_rows, arr)
             _take(self.online.key, online_rows, index)
+        elif online_rows.shape[0] == 0:  # all rows demos (phase 1): the same, from the demo table
+            for name, arr in out.items():
+                _take(getattr(self.demo, name), demo_rows, arr)
+            index[:] = demo_rows
         else:
             d, o = is_demo, ~is_demo
             picked = np.take(records, online_rows, mode="clip") if records is not None else None
@@ -94,7 +103,7 @@ class Sampling:
             index[d] = demo_rows
             index[o] = self.online.key[online_rows]
         return SampledBatch(is_demo=is_demo.astype(np.uint8), index=index, weight=weight, num_batches=nb, info=info,
-                            **out)
+                            **{"next_obs": None, **out})
 
     def update_priorities(self, update: PriorityUpdate) -> int:
         """New priorities for sampled items (e.g. |TD error|); items evicted since are skipped.

@@ -479,9 +479,15 @@ def test_an_imitation_only_update_trains_the_imitation_losses_alone_and_never_re
     assert metrics["loss"] == pytest.approx(0.5 * metrics["margin_loss"] + 2.0 * metrics["bc_loss"], rel=1e-5)
     assert (agent.greedy(obs) == expert).mean() == 1.0
     assert agent.updates == 200 and all(torch.equal(a, b) for a, b in zip(agent.target.parameters(), target_before))
-    # The same agent with the TD loss back on reads the next observations again (here: NaN).
+    # A batch sampled without next observations (SampleRequest(next_obs=False)) serves it alike.
+    without = {k: v for k, v in batch.items() if k != "next_obs"}
+    assert math.isfinite(agent.update(without)["loss"])
+    # The same agent with the TD loss back on reads the next observations again (here: NaN), and
+    # refuses a batch without them in one clear line.
     agent.td_loss = True
     assert math.isnan(agent.update(batch)["loss"])
+    with pytest.raises(ValueError, match="TD loss needs next_obs"):
+        agent.update(without)
 
 
 def test_the_full_update_is_unchanged_by_the_imitation_losses_refactor():

@@ -196,6 +196,9 @@ def test_the_learner_hands_every_row_field_the_update_reads_to_the_agent():
     parts = split_updates(wire.SampledBatch(num_batches=2, **rows))
     assert set(UPDATE_FIELDS) <= set(parts[0]) and "steps" in UPDATE_FIELDS
     assert parts[1]["steps"].tolist() == [4, 5, 6]
+    # Sampled without next observations (SampleRequest(next_obs=False)): every other field.
+    parts = split_updates(wire.SampledBatch(num_batches=2, **{**rows, "next_obs": None}))
+    assert set(parts[0]) == set(UPDATE_FIELDS) - {"next_obs"} and parts[1]["steps"].tolist() == [4, 5, 6]
 
 
 def test_n_step_run_in_process(tmp_path):

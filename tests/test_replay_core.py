@@ -24,6 +24,7 @@ from laneshift.replay_server.core import ReplayCore
 from laneshift.replay_server.rate_limiter import SampleToInsertRatio
 from laneshift.replay_server.storage import DemoTable, RingTable
 from laneshift.wire import SampleRequest, TransitionBatch, TransitionSchema, WireError
+from laneshift.wire.batches import BATCH_FIELDS
 
 SCHEMA = TransitionSchema(obs_shape=(3,), obs_dtype="float32", n_actions=5)
 FUZZ = settings(derandomize=True, database=None, deadline=None, max_examples=150,
@@ -271,6 +272,40 @@ def test_dqfd_pretrains_on_its_demo_region_then_keeps_it_in_the_buffer():
     assert core.stats()["demo_share_buffer"] == 0.5
     with pytest.raises(ValueError, match="forward"):
         core.set_phase(1)
+
+
+def test_a_request_without_next_obs_gets_the_same_rows_without_their_next_observations():
+    """SampleRequest(next_obs=False) draws what the whole request draws (same seed, same rows) and
+    leaves next_obs out: phase 1's demo rows alone, phase 2's mix of demo and online rows, and
+    online rows alone; the reply's bytes decode to the same rows."""
+    def pair(mode: str, **kw) -> tuple[ReplayCore, ReplayCore]:
+        return make_core(mode, **kw), make_core(mode, **kw)
+
+    cases = []
+    whole, part = pair("dqfd", demo=200, capacity=1000, min_size=20)
+    cases.append((whole, part))  # phase 1: every row a demo row
+    whole2, part2 = pair("dqfd", demo=200, capacity=1000, min_size=20)
+    for core in (whole2, part2):
+        core.set_phase(2)
+        fill(core, 100, batch=10)
+    cases.append((whole2, part2))  # demo and online rows
+    whole3, part3 = pair("none", min_size=10)
+    for core in (whole3, part3):
+        fill(core, 60)
+    cases.append((whole3, part3))  # online rows alone
+    for whole, part in cases:
+        a = sample_ok(whole, SampleRequest(64, 2))
+        b = sample_ok(part, SampleRequest(64, 2, next_obs=False))
+        assert b.next_obs is None and a.next_obs is not None
+        for name in BATCH_FIELDS:
+            if name != "next_obs":
+                assert np.array_equal(getattr(a, name), getattr(b, name)), name
+        check_rows_traceable(whole, a)
+        query = wire.encode_sample_request(SampleRequest(64, 2, next_obs=False))
+        sent = wire.decode_batch(part.handle_sample_query(query), SCHEMA)
+        assert sent.next_obs is None and len(sent.action) == 128
+        d = sent.is_demo.astype(bool)
+        assert np.array_equal(sent.obs[d], part.demo.obs[sent.index[d]])
 
 
 def test_rehearsal_needs_demos():

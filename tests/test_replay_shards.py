@@ -137,6 +137,17 @@ def test_retention_keeps_its_demo_share_across_shards():
     assert cs[0].demo.size == cs[1].demo.size == 100
 
 
+def test_a_request_without_next_obs_asks_every_shard_without_and_merges_the_rest():
+    cs = cores(2, [300, 300], demo_mode="retention", demo_ratio=0.1, capacity=2000)
+    whole, part = sharded(cs).sample(SampleRequest(64, 2)), sharded(cs).sample(SampleRequest(64, 2, next_obs=False))
+    assert whole.next_obs is not None and part.next_obs is None
+    assert len(part.action) == 128 and part.num_batches == 2 and set(part.info["shards"]) == {0, 1}
+    assert part.is_demo.any() and not part.is_demo.all()  # both tables, both shards
+    online = ~part.is_demo.astype(bool)
+    assert np.array_equal(part.obs[online, 0], (part.index[online] // 2).astype(np.float32))  # key = shard key * n + i
+    assert np.array_equal(part.obs[online, 1], (part.index[online] % 2).astype(np.float32))
+
+
 def test_prioritized_shards_sample_by_mass_with_the_union_importance_weights():
     cs = cores(2, [400, 400], sampler="prioritized", priority_alpha=1.0)
     # Shard 1's items are 3x as likely as shard 0's: it should get 3/4 of the rows.

@@ -231,18 +231,21 @@ def test_rehearsal_phase1_logs_under_pretrain_at_update_steps(tmp_path):
 
 
 class _DemoLinks(FakeLinks):
-    """Demo rows whose next observations are NaN, and the agent's td_loss recorded at each sample."""
+    """Demo rows whose next observations are NaN (none where the request asks for none, as the
+    replay answers), and the agent's td_loss and the request's next_obs recorded at each sample."""
 
     def __init__(self, learner_ref: list):
         super().__init__()
-        self.learner_ref, self.td_loss_seen = learner_ref, []
+        self.learner_ref, self.td_loss_seen, self.next_obs_asked = learner_ref, [], []
 
     def sample(self, req: wire.SampleRequest) -> wire.SampledBatch:
         if self.learner_ref:
             self.td_loss_seen.append(self.learner_ref[0].agent.td_loss)
+        self.next_obs_asked.append(req.next_obs)
         batch = super().sample(req)
         n = len(batch.action)
-        return dataclasses.replace(batch, next_obs=np.full((n, *OBS), np.nan, np.float32), is_demo=np.ones(n, np.uint8))
+        next_obs = np.full((n, *OBS), np.nan, np.float32) if req.next_obs else None
+        return dataclasses.replace(batch, next_obs=next_obs, is_demo=np.ones(n, np.uint8))
 
 
 def test_phase1_with_phase1_td_false_trains_the_imitation_alone_then_phase2_learns_with_td(tmp_path):
@@ -256,6 +259,7 @@ def test_phase1_with_phase1_td_false_trains_the_imitation_alone_then_phase2_lear
     assert learner.agent.updates == 40 and learner.phase == 2
     assert all(torch.isfinite(p).all() for p in learner.agent.online.parameters())
     assert links.td_loss_seen and not any(links.td_loss_seen)
+    assert links.next_obs_asked and not any(links.next_obs_asked)  # the replies left them out
     assert learner.agent.td_loss  # phase 2 trains the TD loss again
     assert (tmp_path / "checkpoints" / "phase1.safetensors").is_file()
     learner.metrics.close()

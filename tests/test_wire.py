@@ -10,6 +10,7 @@ the code under test needs.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import re
@@ -270,20 +271,37 @@ def test_weights_message_carries_one_uint8_safetensors_array_with_version_metada
 
 
 @pytest.mark.parametrize("req", [SampleRequest(256), SampleRequest(64, 8, min_version=5, actors=("w0", "w1")),
-                                 SampleRequest(1, 64), SampleRequest(MAX_BATCH_ROWS, 1)])
+                                 SampleRequest(1, 64), SampleRequest(MAX_BATCH_ROWS, 1),
+                                 SampleRequest(32, 4, next_obs=False)])
 def test_sample_request_round_trip(req):
     assert decode_sample_request(encode_sample_request(req)) == req
 
 
 def test_sample_request_header_fields():
     msg = decode(encode_sample_request(SampleRequest(32, 2, 3, ("w0",))))
-    assert msg.header == {"batch_size": 32, "num_batches": 2, "min_version": 3, "actors": ["w0"]}
+    assert msg.header == {"batch_size": 32, "num_batches": 2, "min_version": 3, "actors": ["w0"], "next_obs": True}
     assert msg.arrays == {}
 
 
-def test_sample_request_actors_field_is_optional():
+def test_sample_request_actors_and_next_obs_fields_are_optional():
     req = decode_sample_request(envelope(3, {"batch_size": 4, "num_batches": 1, "min_version": -1, "arrays": []}))
-    assert req == SampleRequest(4)
+    assert req == SampleRequest(4) and req.next_obs is True
+
+
+def test_a_batch_without_next_obs_round_trips_and_nothing_else_may_be_missing():
+    """The reply to SampleRequest(next_obs=False): every field but next_obs, decoded with next_obs None."""
+    b = dataclasses.replace(_sampled(), next_obs=None)
+    data = encode_batch(b)
+    assert "next_obs" not in decode(data).arrays and len(data) < len(encode_batch(_sampled()))
+    out = decode_batch(data, SCHEMA)
+    assert out.next_obs is None and out.num_batches == 2 and out.info == {"phase": 1}
+    for f in BATCH_FIELDS:
+        if f != "next_obs":
+            assert np.array_equal(getattr(out, f), getattr(b, f)) and getattr(out, f).dtype == getattr(b, f).dtype
+    arrays = {f: getattr(b, f) for f in BATCH_FIELDS if f != "next_obs"}
+    for missing in ("obs", "weight"):
+        partial = {k: v for k, v in arrays.items() if k != missing}
+        assert reason_of(decode_batch, encode(Kind.BATCH, {"num_batches": 1}, partial), SCHEMA) == "bad_arrays"
 
 
 def _sampled(rows: int = 4, nb: int = 2) -> SampledBatch:
@@ -813,7 +831,8 @@ def test_sample_request_ranges(kw):
 
 @pytest.mark.parametrize("patch", [{"batch_size": None}, {"batch_size": "8"}, {"batch_size": True},
                                    {"num_batches": 1.0}, {"min_version": None}, {"actors": "w0"},
-                                   {"actors": ["w0", 1]}, {"actors": ["a/b"]}, {"actors": None}])
+                                   {"actors": ["w0", 1]}, {"actors": ["a/b"]}, {"actors": None},
+                                   {"next_obs": 0}, {"next_obs": "false"}, {"next_obs": None}])
 def test_sample_request_bad_fields(patch):
     head = {"batch_size": 8, "num_batches": 1, "min_version": -1, "actors": [], **patch, "arrays": []}
     assert reason_of(decode_sample_request, envelope(3, head)) == "bad_request"

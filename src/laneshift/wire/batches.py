@@ -76,7 +76,7 @@ class SampledBatch:
     obs: np.ndarray
     action: np.ndarray
     reward: np.ndarray
-    next_obs: np.ndarray
+    next_obs: np.ndarray | None  # None: the request asked for none (SampleRequest.next_obs=False)
     terminated: np.ndarray
     steps: np.ndarray  # rewards summed per row: the bootstrap is discounted by gamma ** steps
     is_demo: np.ndarray  # 1 where the row came from the demo shard

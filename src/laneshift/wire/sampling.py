@@ -27,17 +27,24 @@ class SampleRequest:
     # weights version >= min_version (the MATLAB "host waits for every worker").
     min_version: int = -1
     actors: tuple[str, ...] = ()
+    # False: the reply leaves the next observations out (``SampledBatch.next_obs`` None), for an
+    # update that reads none (phase 1 of the imitation losses alone, learner.phase1_td=false): half
+    # the bytes of a frame batch to gather, encode, route and decode.
+    next_obs: bool = True
 
     def __post_init__(self) -> None:
         if not 1 <= self.batch_size <= MAX_BATCH_ROWS or not 1 <= self.num_batches <= 64:
             raise WireError("bad_request", f"batch_size {self.batch_size} / num_batches {self.num_batches} out of range")
         if self.batch_size * self.num_batches > MAX_BATCH_ROWS:
             raise WireError("bad_request", "batch_size * num_batches too large")
+        if not isinstance(self.next_obs, bool):
+            raise WireError("bad_request", f"next_obs must be true or false, got {self.next_obs!r}")
 
 
 def encode_sample_request(req: SampleRequest) -> bytes:
     return encode(Kind.SAMPLE_REQUEST, {"batch_size": req.batch_size, "num_batches": req.num_batches,
-                                        "min_version": req.min_version, "actors": list(req.actors)})
+                                        "min_version": req.min_version, "actors": list(req.actors),
+                                        "next_obs": req.next_obs})
 
 
 def decode_sample_request(data: bytes | bytearray | memoryview) -> SampleRequest:
@@ -46,9 +53,11 @@ def decode_sample_request(data: bytes | bytearray | memoryview) -> SampleRequest
     actors = h.get("actors", [])
     if not isinstance(actors, list) or not all(isinstance(x, str) and NAME.fullmatch(x) for x in actors):
         raise WireError("bad_request", f"bad actors list {actors!r}")
+    next_obs = h.get("next_obs", True)  # optional, like actors: absent means the whole rows
     return SampleRequest(batch_size=require_field(h, "batch_size", int, "bad_request"),
                          num_batches=require_field(h, "num_batches", int, "bad_request"),
-                         min_version=require_field(h, "min_version", int, "bad_request"), actors=tuple(actors))
+                         min_version=require_field(h, "min_version", int, "bad_request"), actors=tuple(actors),
+                         next_obs=next_obs)
 
 
 def encode_batch(batch: SampledBatch) -> bytes | bytearray:
@@ -56,7 +65,7 @@ def encode_batch(batch: SampledBatch) -> bytes | bytearray:
     if fast is not None:
         return fast
     return encode(Kind.BATCH, {"num_batches": batch.num_batches, "info": batch.info},
-                  {k: getattr(batch, k) for k in BATCH_FIELDS})
+                  {k: getattr(batch, k) for k in BATCH_FIELDS if getattr(batch, k) is not None})
 
 
 def decode_batch(data: bytes | bytearray | memoryview, schema: TransitionSchema) -> SampledBatch:
@@ -68,12 +77,13 @@ def decode_batch(data: bytes | bytearray | memoryview, schema: TransitionSchema)
 
 def _checked_batch(data: bytes | bytearray | memoryview, schema: TransitionSchema) -> SampledBatch:
     msg = decode(data, expect=Kind.BATCH)
-    if set(msg.arrays) != set(BATCH_FIELDS):
+    # Every field, or every field but next_obs (the reply to a SampleRequest with next_obs=False).
+    if set(msg.arrays) not in (set(BATCH_FIELDS), set(BATCH_FIELDS) - {"next_obs"}):
         raise WireError("bad_arrays", f"batch arrays {sorted(msg.arrays)}")
     if msg.arrays["action"].ndim != 1:
         raise WireError("bad_shape", f"batch action must be 1-D, got shape {msg.arrays['action'].shape}")
     rows = msg.arrays["action"].shape[0]
-    for name in ("obs", "next_obs"):
+    for name in [n for n in ("obs", "next_obs") if n in msg.arrays]:
         if msg.arrays[name].shape != (rows, *schema.obs_shape) or msg.arrays[name].dtype.str != schema.obs_dtype:
             raise WireError("bad_shape", f"batch {name} {msg.arrays[name].shape} does not fit the schema")
     for name in BATCH_FIELDS[1:]:
@@ -85,7 +95,7 @@ def _checked_batch(data: bytes | bytearray | memoryview, schema: TransitionSchem
     nb = require_field(msg.header, "num_batches", int)
     if nb < 1 or rows % nb:
         raise WireError("bad_header", f"{rows} rows do not split into {nb} batches")
-    return SampledBatch(num_batches=nb, info=msg.header.get("info", {}), **msg.arrays)
+    return SampledBatch(num_batches=nb, info=msg.header.get("info", {}), **{"next_obs": None, **msg.arrays})
 
 
 # --------------------------------------------------------------------------- priorities
