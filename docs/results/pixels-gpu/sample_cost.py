@@ -4,6 +4,7 @@ gather, encode, decode) and over zenoh from a ``laneshift replay-server`` proces
 then decode), for several rows per request. Prints ms per request and per 128 rows.
 
     python sample_cost.py SHARD_DIR     # the shard run_gpu.py uses (.gpu/runs/demos/straight-grayscale...)
+    python sample_cost.py SHARD_DIR no-next-obs   # requests with next_obs=False (phase 1 of the imitation alone)
 
 Room: a study script (docs/results). May import: anything in laneshift.
 """
@@ -41,6 +42,7 @@ def timed(label: str, draw) -> None:
 
 def main() -> int:
     shard = sys.argv[1]
+    next_obs = sys.argv[2:] != ["no-next-obs"]
     work = Path(tempfile.mkdtemp(prefix="sample-cost-"))
     endpoint = f"tcp/127.0.0.1:{transport.free_tcp_port()}"
     cfg = load_run_config(overrides={**method_settings("dqfd-bc-anneal", "m"), "env.observation": "grayscale",
@@ -53,8 +55,10 @@ def main() -> int:
     local = InProcessReplay(core, schema)
 
     def in_process(rows: int, nb: int) -> int:
-        batch = local.sample(wire.SampleRequest(rows, nb))
-        return batch.obs.nbytes + batch.next_obs.nbytes  # the frames: nearly all of the message
+        batch = local.sample(wire.SampleRequest(rows, nb, next_obs=next_obs))
+        assert (batch.next_obs is not None) == next_obs and len(batch.action) == rows * nb
+        # the frames: nearly all of the message
+        return batch.obs.nbytes + (batch.next_obs.nbytes if batch.next_obs is not None else 0)
 
     timed("inprocess", in_process)
     del core, local
@@ -70,8 +74,9 @@ def main() -> int:
 
             def over_zenoh(rows: int, nb: int) -> int:
                 reply = transport.query(session, wire.sample_key(ns),
-                                        wire.encode_sample_request(wire.SampleRequest(rows, nb)), 30)
-                wire.decode_batch(reply, schema)
+                                        wire.encode_sample_request(wire.SampleRequest(rows, nb, next_obs=next_obs)), 30)
+                batch = wire.decode_batch(reply, schema)
+                assert (batch.next_obs is not None) == next_obs and len(batch.action) == rows * nb
                 return len(reply)
 
             timed("zenoh", over_zenoh)
