@@ -78,14 +78,10 @@ class Sampling:
                                 next_obs=picked["next_obs"] if next_obs else None, terminated=picked["terminated"],
                                 steps=picked["steps"],
                                 is_demo=is_demo.view(np.uint8), index=index, weight=weight, num_batches=nb, info=info)
-        out = {
-            "obs": np.empty((n, *self.schema.obs_shape), self.schema.obs_dtype),
-            "next_obs": np.empty((n, *self.schema.obs_shape), self.schema.obs_dtype),
-            "action": np.empty(n, np.int64), "reward": np.empty(n, np.float32), "terminated": np.empty(n, np.uint8),
-            "steps": np.empty(n, np.uint8),
-        }
-        if not next_obs:
-            del out["next_obs"]
+        frames = ("obs", "next_obs") if next_obs else ("obs",)
+        out = {name: np.empty((n, *self.schema.obs_shape), self.schema.obs_dtype) for name in frames}
+        out.update(action=np.empty(n, np.int64), reward=np.empty(n, np.float32), terminated=np.empty(n, np.uint8),
+                   steps=np.empty(n, np.uint8))
         if demo_rows.shape[0] == 0:  # all rows online (no demos sampled): gather straight into the outputs
             for name, arr in out.items():
                 _take(getattr(self.online, name), online_rows, arr)
