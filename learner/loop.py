@@ -99,7 +99,6 @@ class Learner:
         self.unused_sample_rows = 0  # rows sampled ahead that no update used (phase 1's end, the run's end)
         self.stop_reason: dict | None = None
         self.started = time.monotonic()
-        self.rates = IntervalRates()
         self.last_status: LearnerStatus | None = None  # what the launcher's progress line reads
         self.sample_wait_s = 0.0  # the update thread's time waiting on a batch
         # When the first batch came, and sample_wait_s then: the wait while the replay fills to
@@ -110,6 +109,9 @@ class Learner:
         self._wait_before_first_batch = 0.0
         self._last_state_save = time.monotonic()
         self.restored_from: dict | None = self._restore()
+        # Rates count from where the run stands now: a resumed run's restored updates and env steps
+        # were not made in its first status interval (they read 6,171 updates/s and 3,268 steps/s).
+        self.rates = IntervalRates(updates=self.agent.updates, env_steps=self.env_steps)
         self.prometheus = None  # learner.metrics_port >= 0: /metrics from the status of each log interval
         if self.lcfg.metrics_port >= 0:
             from .prometheus import LearnerMetricsServer

@@ -86,8 +86,9 @@ class LearnerStatus:
 class IntervalRates:
     """Rates over the interval since the previous call of ``take``."""
 
-    def __init__(self) -> None:
-        self._updates, self._steps, self._wait_s, self._time = 0, 0, 0.0, time.monotonic()
+    def __init__(self, updates: int = 0, env_steps: int = 0) -> None:
+        """``updates``, ``env_steps``: the counts at the start (a resumed run's restored ones)."""
+        self._updates, self._steps, self._wait_s, self._time = updates, env_steps, 0.0, time.monotonic()
 
     def take(self, now: float, updates: int, env_steps: int, wait_s: float) -> tuple[float, float, float]:
         """(updates/s, env steps/s, the share of the interval spent waiting for batches)."""

@@ -166,6 +166,22 @@ def test_every_metric_at_env_step_steps_that_never_go_back_across_a_resume(tmp_p
     assert len(episodes) == 2 * (4 + 5) and [r["episode"] for r in episodes] == list(range(1, 19))
 
 
+def test_a_resumed_learner_counts_its_rates_from_where_it_restarted(tmp_path):
+    # The rates of the first status after a resume once counted the restored updates and env steps
+    # as made in that interval (6,171 updates/s and 3,268 env steps/s in a pixel run making 35).
+    links = FakeLinks()
+    learner = _learner(tmp_path, links)
+    learner.publish()
+    _drive(learner, links, rounds=4, replay_steps=100, actor_steps=40)
+    learner._finish()
+    assert learner.env_steps == 400 and learner.agent.updates > 0
+
+    again = _learner(tmp_path, FakeLinks(env_steps=400))  # the replay server kept its count
+    again._log()  # no update and no env step since the restart
+    assert again.last_status.updates == learner.agent.updates and again.last_status.env_steps == 400
+    assert again.last_status.updates_per_s == 0.0 and again.last_status.env_steps_per_s == 0.0
+
+
 @pytest.mark.parametrize("fade_steps, expected", [(0, [1.0, 0.5, 0.0, 0.0]), (250, [1.0, 0.0, 0.0, 0.0])])
 def test_the_imitation_losses_fade_with_the_env_steps_and_the_scale_is_logged(tmp_path, fade_steps, expected):
     links = FakeLinks()
