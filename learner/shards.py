@@ -137,7 +137,7 @@ class ShardedReplay:
         info = dict(parts[0][1].info)
         info["live"] = sum(int(b.info.get("live", 0)) for _, b in parts)
         info["shards"] = [i for i, _ in parts]
-        return wire.SampledBatch(**{"next_obs": None, **{k: v[order] for k, v in cat.items()}}, index=index[order],
+        return wire.SampledBatch(**{k: v[order] for k, v in cat.items()}, index=index[order],
                                  weight=weight[order], num_batches=num_batches, info=info)
 
     def _union_weights(self, shard: int, batch: wire.SampledBatch) -> np.ndarray:

@@ -99,7 +99,7 @@ class Sampling:
             index[d] = demo_rows
             index[o] = self.online.key[online_rows]
         return SampledBatch(is_demo=is_demo.astype(np.uint8), index=index, weight=weight, num_batches=nb, info=info,
-                            **{"next_obs": None, **out})
+                            **out)
 
     def update_priorities(self, update: PriorityUpdate) -> int:
         """New priorities for sampled items (e.g. |TD error|); items evicted since are skipped.

@@ -69,14 +69,14 @@ class TransitionBatch:
         return int(self.action.shape[0])
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)  # keyword-only: next_obs defaults to None where it stands
 class SampledBatch:
     """``num_batches * batch_size`` rows; split with ``np.split(..., num_batches)``."""
 
     obs: np.ndarray
     action: np.ndarray
     reward: np.ndarray
-    next_obs: np.ndarray | None  # None: the request asked for none (SampleRequest.next_obs=False)
+    next_obs: np.ndarray | None = None  # None: the request asked for none (SampleRequest.next_obs=False)
     terminated: np.ndarray
     steps: np.ndarray  # rewards summed per row: the bootstrap is discounted by gamma ** steps
     is_demo: np.ndarray  # 1 where the row came from the demo shard

@@ -95,7 +95,7 @@ def _checked_batch(data: bytes | bytearray | memoryview, schema: TransitionSchem
     nb = require_field(msg.header, "num_batches", int)
     if nb < 1 or rows % nb:
         raise WireError("bad_header", f"{rows} rows do not split into {nb} batches")
-    return SampledBatch(num_batches=nb, info=msg.header.get("info", {}), **{"next_obs": None, **msg.arrays})
+    return SampledBatch(num_batches=nb, info=msg.header.get("info", {}), **msg.arrays)
 
 
 # --------------------------------------------------------------------------- priorities
