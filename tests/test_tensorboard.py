@@ -182,6 +182,26 @@ def test_a_resumed_learner_counts_its_rates_from_where_it_restarted(tmp_path):
     assert again.last_status.updates_per_s == 0.0 and again.last_status.env_steps_per_s == 0.0
 
 
+def test_a_resumed_learner_evaluates_at_its_next_multiple_of_eval_every(tmp_path):
+    # It once evaluated at once at the resume point, then again at the next multiple.
+    links = FakeLinks()
+    learner = _learner(tmp_path, links)
+    learner.publish()
+    _drive(learner, links, rounds=4, replay_steps=110, actor_steps=40)
+    learner._finish()
+    assert learner.env_steps == 440
+
+    cfg = load_run_config(overrides={**SMALL, "train.run_dir": str(tmp_path), "train.eval_every": 100})
+    again = Learner(cfg, SPEC, FakeLinks(env_steps=440), threading.Event(), evaluate=lambda batch: {})
+    assert again.env_steps == 440 and again.evaluator.next_at == 500
+    assert not again.evaluator.due(440) and again.evaluator.due(500)
+    again.metrics.close()
+    new_cfg = load_run_config(overrides={**SMALL, "train.run_dir": str(tmp_path / "new"), "train.eval_every": 100})
+    fresh = Learner(new_cfg, SPEC, FakeLinks(), threading.Event(), evaluate=lambda batch: {})
+    assert fresh.evaluator.next_at == 100  # a new run: the first multiple
+    fresh.metrics.close()
+
+
 @pytest.mark.parametrize("fade_steps, expected", [(0, [1.0, 0.5, 0.0, 0.0]), (250, [1.0, 0.0, 0.0, 0.0])])
 def test_the_imitation_losses_fade_with_the_env_steps_and_the_scale_is_logged(tmp_path, fade_steps, expected):
     links = FakeLinks()
