@@ -395,6 +395,25 @@ def test_every_named_method_builds_a_valid_config():
     assert anneal.learner.bc_loss_weight == 1.0 and anneal.learner.n_step == 10  # dqfd-bc underneath
 
 
+def test_the_pixel_preset_is_the_command_line_of_the_pixel_runs():
+    # dqfd-bc-pixels names the --set flags of probe 18's runs; the run's own recorded config (the
+    # protocol's json of seed 2, docs/results/pixels-probe-lp-fp32/) is the reference, field by field.
+    from pathlib import Path
+
+    from laneshift.config import method_settings
+
+    recorded = json.loads((Path(__file__).parents[1] / "docs/results/pixels-probe-lp-fp32/seed2.json").read_text())
+    assert recorded["method"] == "dqfd-bc-anneal" and "--set learner.frozen_steps=150000" in recorded["command"]
+    cfg = load_run_config(overrides={**method_settings("dqfd-bc-pixels"), "env.scenario": "straight",
+                                     "actor.seed": 2, "learner.seed": 2, "replay.seed": 2})
+    ours = json.loads(json.dumps(cfg.to_dict()))
+    wiring = {"demo_paths", "http_port", "metrics_port"}  # the protocol sets them per run (its shard, free ports)
+    for section in ("env", "actor", "replay", "learner"):
+        differ = {k: (v, ours[section].get(k)) for k, v in recorded["config"][section].items()
+                  if k in ours[section] and k not in wiring and ours[section][k] != v}
+        assert not differ, (section, differ)
+
+
 def test_alongside_features_need_the_lane_features_and_reach_the_env():
     cfg = load_run_config(overrides={"env.alongside_features": "true", "env.scenario": "merge"})
     assert cfg.env.env_kwargs()["alongside_features"] is True

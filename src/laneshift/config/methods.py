@@ -88,6 +88,23 @@ METHODS: dict[str, dict[str, Any]] = {
     # on merge's validation episodes (seed 0, 200 per setting): 100 / 93.5 and 99.5 / 88.0 against
     # 99.5 / 88.0 and 99.5 / 82.0 without them (docs/RESULTS.md, "gap features").
     "dqfd-bc-alongside-gaps-safe-shield": {**_SHIELDED, "env.gap_features": True},
+    # The pixel recipe (the paper's 4 x 100 x 100 grayscale frames, here 8 policy steps apart): SmallCNN on
+    # rows 22-78 (the road's band) with DrQ's shift; a pre-training by the imitation losses alone for
+    # 120,000 updates (a copy of the driver from frames drove far better than DQfD's pre-training), then
+    # Double DQN with every layer but the Q output layer frozen for the whole of the measured 150,000 env
+    # steps (linear probing: with every layer trained, the TD loss's lift of the Q-values took the copy's
+    # features with it); 32 sampled rows per env step, a smaller step size. Float32 convolutions (bf16 is
+    # emulated, 10x slower, on CPUs without bf16 instructions), one torch thread in phase 1 (faster than
+    # two in the run). Probe 18 of docs/RESULTS.md ("Pixels"): 3 seeds' final networks past the paper's
+    # best pixel row; this is the command line of its runs as one name (tests/test_config.py holds it
+    # to the recorded config of seed 2's run).
+    "dqfd-bc-pixels": {**_DQFD, **_ANNEALED_LEARNER, "learner.bc_loss_weight": 1.0,
+                       "env.observation": "grayscale", "env.frame_interval": 8, "learner.cnn": "small",
+                       "learner.batch_size": 32, "learner.cnn_rows": "22:78", "learner.augment": "shift",
+                       "learner.cnn_precision": "fp32", "learner.phase1_updates": 120_000, "learner.phase1_td": False,
+                       "learner.phase1_threads": 1, "learner.frozen_steps": 150_000,
+                       "learner.frozen_layers": "all-but-output", "replay.samples_per_insert": 32.0,
+                       "replay.capacity": 200_000, "learner.lr": 1e-4, "learner.lr_final": 1e-5},
     # The LKA plant's recipe (MATLAB's lane-keeping example has no demonstrations): one-step Double
     # DQN with a larger step size, learning from 1,000 items on and 64 samples per inserted item;
     # 20,000 env steps centre the car (docs/RESULTS.md, LKA; `laneshift experiment lka`).
