@@ -165,6 +165,33 @@ def test_protocol_trains_tests_publishes_and_skips_a_finished_seed(tmp_path, cap
     assert "is of another protocol (test" in capsys.readouterr().err
 
 
+def test_a_finished_seed_is_published_before_the_next_seed_runs(tmp_path, monkeypatch, capsys):
+    # The networks were once published at the study's end only: a later seed's stopped run left a
+    # finished seed's network unpublished (and lost with a machine that was replaced).
+    from laneshift.tools import cli
+    from laneshift.tools.studies import protocol
+
+    out, pub = tmp_path / "proto", tmp_path / "published"
+    argv = ["experiment", "protocol", "--scenario", "straight", "--method", "dqfd", "--seeds", "0,1",
+            "--env-steps", "400", "--test-episodes", "2", "--eval-max-steps", "30", "--validation-every", "0",
+            "--out", str(out), "--publish", str(pub), *TINY]
+    train = protocol.train_seed
+
+    def seed_1_stopped(cfg, state, out_dir, method):
+        if cfg.train.seed == 1:
+            raise SystemExit("seed 1: stopped; the same command again continues it")
+        train(cfg, state, out_dir, method)
+
+    monkeypatch.setattr(protocol, "train_seed", seed_1_stopped)
+    assert cli.main(argv) != 0
+    assert "seed 1: stopped" in capsys.readouterr().err
+    assert (pub / "straight-dqfd-seed0-final.safetensors").read_bytes() == \
+        (out / "dqfd-s0" / "checkpoints" / "final.safetensors").read_bytes()
+    doc = json.loads((pub / "straight-dqfd-seed0-final.json").read_text())
+    assert doc["seed"] == 0 and doc["test"]["lanes"]["random"]["episodes"] == 2
+    assert not (pub / "straight-dqfd-seed1-final.safetensors").exists() and not (out / "results.json").exists()
+
+
 def test_bad_input_fails_before_any_run(tmp_path, capsys):
     from laneshift.tools import cli
 

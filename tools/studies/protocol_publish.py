@@ -14,7 +14,7 @@ import os
 import shlex
 import shutil
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Collection
 
 from laneshift.checkpoints import run_checkpoint
 from laneshift.config import EnvConfig
@@ -74,17 +74,24 @@ def publish_final(run: dict, dest: Path, road: str, method: str, label: str,
     return [checkpoint, dest / f"{stem}.json"]
 
 
-def publish(results: dict, dest: Path, road: str) -> list[Path]:
+def publish(results: dict, dest: Path, road: str, skip: Collection[int] = ()) -> list[Path]:
     """Each seed's final network as ``dest/<road>-<method>-seed<N>-final.safetensors`` with its
     provenance and test table beside it (``.json``); allroads: the four roads pooled in ``lanes``
     (no one command gives them) and per road in ``roads``, with each road's ``laneshift eval``
-    commands."""
-    dest.mkdir(parents=True, exist_ok=True)
+    commands. ``skip``: seeds published already."""
     method, written = results["method"], []
     for run in results["methods"][method]["runs"]:
-        written += publish_final(run, dest, road, method, "protocol", lambda checkpoint, run=run: {
-            "test": _test_table(checkpoint, run), "validation": run["validation"]})
+        if run["seed"] not in skip:
+            written += publish_run(run, dest, road, method)
     return written
+
+
+def publish_run(run: dict, dest: Path, road: str, method: str) -> list[Path]:
+    """One seed's final network and its ``.json`` (``publish``'s files for that seed), from the seed's
+    record (``<method>-s<seed>.json``): the protocol calls it as each seed finishes, so a finished
+    seed's network is published even if a later seed's run is stopped."""
+    return publish_final(run, dest, road, method, "protocol", lambda checkpoint: {
+        "test": _test_table(checkpoint, run), "validation": run["validation"]})
 
 
 def _test_table(checkpoint: Path, run: dict) -> dict:
