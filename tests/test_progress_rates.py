@@ -48,3 +48,22 @@ def test_a_new_runs_bar_counts_from_zero(monkeypatch):
         log.write(_status_line(2_000))
         log.write(_status_line(1_500))  # a count that goes back leaves the bar still
         assert bar.n == 2_000 and bar.initial == 0
+
+
+def _phase1_line(updates: int) -> str:
+    return f"[  10.0s] steps       0/150,000 (    0/s) | ep     0 return - | upd {updates:>6,} (50/s) loss 1.0 | v3 phase 1\n"
+
+
+def test_the_bar_shows_the_pre_trainings_updates_before_the_first_env_step(monkeypatch):
+    monkeypatch.setenv("LANESHIFT_PROGRESS_S", "0")
+    out = io.StringIO()
+    with progress(total=150_000, desc="train", unit="step", file=out) as bar:
+        log = _TrainLog(bar, phase1_updates=120_000)
+        log.write(_phase1_line(500))
+        log.write(_phase1_line(1_500))
+        log.write(_status_line(64).replace("(   35/s) |", "(   35/s) | upd 120,100 (40/s) | v9 phase 2"))
+        assert bar.n == 64 and not bar.postfix
+    lines = out.getvalue().splitlines()
+    assert any(line.endswith("pre-training 500/120,000 updates") for line in lines), lines
+    assert any(line.endswith("pre-training 1,500/120,000 updates") for line in lines), lines
+    assert lines[-1].startswith("train: 64/150000 step") and "pre-training" not in lines[-1], lines

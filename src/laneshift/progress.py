@@ -32,7 +32,7 @@ _PLAIN_FORMAT = "{desc}: {n_fmt}/{total_fmt} {unit} ({percentage:.0f} %) [{elaps
 
 class _Lines:
     """A file for tqdm off a terminal: each redraw becomes one whole line; cursor moves, clears
-    and a repeat of the previous count (the closing redraw after the last update) are dropped."""
+    and a repeat of the previous count and postfix (the closing redraw after the last update) are dropped."""
 
     def __init__(self, out: TextIO):
         self.out = out
@@ -41,7 +41,9 @@ class _Lines:
     def write(self, text: str) -> None:
         for part in re.split(r"[\r\n]", _ANSI.sub("", str(text))):
             line = part.rstrip()
-            count = line.split(" [", 1)[0]  # "desc: n/total unit (p %)": the timings after it change
+            # "desc: n/total unit (p %) [timings], postfix": a line is new when the count or the
+            # postfix moved, not the timings alone.
+            count = re.sub(r" \[[^\]]*\]", "", line)
             if line and count != self.last:
                 self.out.write(line + "\n")
                 self.last = count

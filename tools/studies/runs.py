@@ -40,13 +40,18 @@ class _TrainLog(io.StringIO):
     steps this piece makes (it read 2,500 steps/s and seconds left for a pixel run at 35/s)."""
 
     _STEPS = re.compile(r"steps\s+([\d,]+)/([\d,]+)")
+    # "| upd  1,234 (45/s) ... | v12 phase 1": the pre-training's updates, while no env step is made.
+    _PRETRAINING = re.compile(r"\bupd\s+([\d,]+)\b.*\bphase 1\b")
 
-    def __init__(self, bar, resume: bool = False):
+    def __init__(self, bar, resume: bool = False, phase1_updates: int = 0):
         super().__init__()
         self.bar = bar
         self.resume = resume
+        self.phase1_updates = phase1_updates
 
     def write(self, text: str) -> int:
+        for line in text.splitlines():
+            self._pretraining(line)
         for m in self._STEPS.finditer(text):
             done = min(int(m.group(1).replace(",", "")), int(self.bar.total or 0))
             if self.resume and self.bar.n == 0 and done > 0:
@@ -55,6 +60,21 @@ class _TrainLog(io.StringIO):
             elif done > self.bar.n:
                 self.bar.update(done - self.bar.n)
         return super().write(text)
+
+    def _pretraining(self, line: str) -> None:
+        """The pre-training's update count on the bar (a pixel run pre-trains for 40 minutes before
+        its first env step; the bar once stood at 0 all that time), redrawn at the bar's own pace."""
+        m = self._PRETRAINING.search(line)
+        if m is not None:
+            of = f"/{self.phase1_updates:,}" if self.phase1_updates else ""
+            self.bar.set_postfix_str(f"pre-training {int(m.group(1).replace(',', '')):,}{of} updates", refresh=False)
+        elif "phase 2" in line and self.bar.postfix:
+            self.bar.set_postfix_str("", refresh=False)
+        else:
+            return
+        if self.bar._time() - self.bar.last_print_t >= self.bar.mininterval:
+            self.bar.refresh()
+            self.bar.last_print_t = self.bar._time()
 
     def _start_at(self, done: int) -> None:
         bar = self.bar
@@ -72,7 +92,7 @@ def train_logged(cfg: RunConfig, log_path: Path, label: str | None = None, resum
 
     with progress(total=cfg.train.env_steps, desc=label or "", unit="step", leave=False,
                   disable=label is None) as bar:
-        log = _TrainLog(bar, resume=resume)
+        log = _TrainLog(bar, resume=resume, phase1_updates=cfg.learner.phase1_updates)
         rc = train_local(cfg, out=log, resume=resume)
     with open(log_path, "a" if resume else "w") as f:
         f.write(log.getvalue())
