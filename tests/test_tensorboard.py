@@ -100,6 +100,17 @@ def _drive(learner: Learner, links: FakeLinks, rounds: int, replay_steps: int, a
         learner._log()
 
 
+def _stopped_run(run_dir, replay_steps: int = 100) -> Learner:
+    """A learner driven for 4 log intervals (the replay server's count growing by ``replay_steps``
+    each) and finished: its state in ``run_dir`` for a resumed learner to restore."""
+    links = FakeLinks()
+    learner = _learner(run_dir, links)
+    learner.publish()
+    _drive(learner, links, rounds=4, replay_steps=replay_steps, actor_steps=40)
+    learner._finish()
+    return learner
+
+
 def _scalars(tb_dir) -> event_accumulator.EventAccumulator:
     acc = event_accumulator.EventAccumulator(str(tb_dir), size_guidance={event_accumulator.SCALARS: 0})
     acc.Reload()
@@ -111,11 +122,7 @@ def _steps(acc, tag: str) -> list[int]:
 
 
 def test_every_metric_at_env_step_steps_that_never_go_back_across_a_resume(tmp_path):
-    links = FakeLinks()
-    learner = _learner(tmp_path, links)
-    learner.publish()
-    _drive(learner, links, rounds=4, replay_steps=100, actor_steps=40)
-    learner._finish()
+    learner = _stopped_run(tmp_path)
     first_end = learner.env_steps
     assert first_end == 400  # the replay server's count (ahead of the episode reports here)
 
@@ -169,11 +176,7 @@ def test_every_metric_at_env_step_steps_that_never_go_back_across_a_resume(tmp_p
 def test_a_resumed_learner_counts_its_rates_from_where_it_restarted(tmp_path):
     # The rates of the first status after a resume once counted the restored updates and env steps
     # as made in that interval (6,171 updates/s and 3,268 env steps/s in a pixel run making 35).
-    links = FakeLinks()
-    learner = _learner(tmp_path, links)
-    learner.publish()
-    _drive(learner, links, rounds=4, replay_steps=100, actor_steps=40)
-    learner._finish()
+    learner = _stopped_run(tmp_path)
     assert learner.env_steps == 400 and learner.agent.updates > 0
 
     again = _learner(tmp_path, FakeLinks(env_steps=400))  # the replay server kept its count
@@ -184,11 +187,7 @@ def test_a_resumed_learner_counts_its_rates_from_where_it_restarted(tmp_path):
 
 def test_a_resumed_learner_evaluates_at_its_next_multiple_of_eval_every(tmp_path):
     # It once evaluated at once at the resume point, then again at the next multiple.
-    links = FakeLinks()
-    learner = _learner(tmp_path, links)
-    learner.publish()
-    _drive(learner, links, rounds=4, replay_steps=110, actor_steps=40)
-    learner._finish()
+    learner = _stopped_run(tmp_path, replay_steps=110)
     assert learner.env_steps == 440
 
     cfg = load_run_config(overrides={**SMALL, "train.run_dir": str(tmp_path), "train.eval_every": 100})
