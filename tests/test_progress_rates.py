@@ -67,3 +67,12 @@ def test_the_bar_shows_the_pre_trainings_updates_before_the_first_env_step(monke
     assert any(line.endswith("pre-training 500/120,000 updates") for line in lines), lines
     assert any(line.endswith("pre-training 1,500/120,000 updates") for line in lines), lines
     assert lines[-1].startswith("train: 64/150000 step") and "pre-training" not in lines[-1], lines
+
+
+def test_with_progress_off_the_lines_only_go_to_the_log(monkeypatch):
+    monkeypatch.setenv("LANESHIFT_PROGRESS", "0")
+    with progress(total=150_000, desc="train", unit="step") as bar:
+        log = _TrainLog(bar, resume=True, phase1_updates=120_000)
+        for text in (_phase1_line(500), _status_line(133_536), _status_line(134_000)):
+            log.write(text)
+    assert log.getvalue().count("\n") == 3

@@ -64,6 +64,8 @@ class _TrainLog(io.StringIO):
     def _pretraining(self, line: str) -> None:
         """The pre-training's update count on the bar (a pixel run pre-trains for 40 minutes before
         its first env step; the bar once stood at 0 all that time), redrawn at the bar's own pace."""
+        if self.bar.disable:  # progress off: a disabled tqdm has no timings to pace by
+            return
         m = self._PRETRAINING.search(line)
         if m is not None:
             of = f"/{self.phase1_updates:,}" if self.phase1_updates else ""
@@ -78,6 +80,9 @@ class _TrainLog(io.StringIO):
 
     def _start_at(self, done: int) -> None:
         bar = self.bar
+        if bar.disable:  # progress off: nothing to draw
+            bar.n = done
+            return
         bar.n = bar.initial = bar.last_print_n = done
         bar.start_t = bar.last_print_t = bar._time()
         bar.refresh()
