@@ -24,14 +24,13 @@ class Progress:
         s = self.last
         if not s:
             return f"[{time.monotonic() - self.started:6.1f}s] starting ..."
-        elapsed = max(time.monotonic() - self.started, 1e-6)
+        elapsed = time.monotonic() - self.started
         fmt = lambda v, f: format(v, f) if isinstance(v, (int, float)) else "-"  # noqa: E731
         lag = s.get("version_lag") or {}
-        # The learner's own rate over its last status interval: env_steps / elapsed would count the
-        # steps a resumed run had made before this launch as made now.
-        rate = s.get("env_steps_per_s")
-        rate = rate if isinstance(rate, (int, float)) else s.get("env_steps", 0) / elapsed
-        return (f"[{elapsed:6.1f}s] steps {s.get('env_steps', 0):>7,}/{self.budget:,} ({rate:5.0f}/s)"
+        # The learner's own rate over its last status interval, as for updates: env_steps / elapsed
+        # would count the steps a resumed run had made before this launch as made now.
+        return (f"[{elapsed:6.1f}s] steps {s.get('env_steps', 0):>7,}/{self.budget:,}"
+                f" ({fmt(s.get('env_steps_per_s'), '5.0f')}/s)"
                 f" | ep {s.get('episodes', 0):>5} return {fmt(s.get('return_mean'), '7.2f')}"
                 f" crash {fmt(s.get('crash_rate'), '.2f')}"
                 f" | upd {s.get('updates', 0):>6,} ({fmt(s.get('updates_per_s'), '.0f')}/s)"

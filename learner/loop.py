@@ -110,7 +110,7 @@ class Learner:
         self._last_state_save = time.monotonic()
         self.restored_from: dict | None = self._restore()
         if self.evaluator is not None:
-            self.evaluator.resume_at(self.env_steps)
+            self.evaluator.skip_past(self.env_steps)
         # Rates count from where the run stands now: a resumed run's restored updates and env steps
         # were not made in its first status interval (they read 6,171 updates/s and 3,268 steps/s).
         self.rates = IntervalRates(updates=self.agent.updates, env_steps=self.env_steps)

@@ -65,16 +65,17 @@ class GreedyEval:
     def due(self, env_steps: int) -> bool:
         return self.every > 0 and self.failed is None and env_steps >= self.next_at and not self.running
 
-    def resume_at(self, env_steps: int) -> None:
-        """A resumed run's next evaluation is its next multiple of ``every`` (the first due check
-        once ran one at the resume point, then another at the next multiple: two in 1,600 env steps)."""
-        if self.every > 0 and env_steps > 0:
+    def skip_past(self, env_steps: int) -> None:
+        """The next evaluation is due at the first multiple of ``every`` above ``env_steps``: after one
+        starts, and where a resumed run stands (its first due check once ran one at the resume point,
+        then another at the next multiple: two in 1,600 env steps)."""
+        if self.every > 0:
             self.next_at = (env_steps // self.every + 1) * self.every
 
     def start(self, online: torch.nn.Module, env_steps: int, **info: Any) -> None:
         """Evaluate ``online``'s current weights; the result carries ``env_steps`` and ``info``."""
         state = {k: v.detach().to("cpu", copy=True) for k, v in online.state_dict().items()}
-        self.next_at = (env_steps // self.every + 1) * self.every
+        self.skip_past(env_steps)
         self._thread = threading.Thread(target=self._run, args=(state, {"env_steps": env_steps, **info}),
                                         name="greedy-eval", daemon=True)
         self._thread.start()

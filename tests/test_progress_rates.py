@@ -25,7 +25,7 @@ def test_the_status_line_shows_the_learners_own_rate():
     line = Progress(out, budget=150_000)
     line.last = {"env_steps": 133_536, "env_steps_per_s": 34.6, "updates": 9_000}
     assert "steps 133,536/150,000 (   35/s)" in line.line()
-    line.last = {"env_steps": 100}  # a status without the rate (an older learner): steps over elapsed
+    line.last = {"env_steps": 100}  # a status without the rate (an older learner): "-", as for updates
     assert "steps     100/150,000" in line.line()
 
 

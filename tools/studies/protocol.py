@@ -58,7 +58,7 @@ from laneshift.progress import progress, write
 from laneshift.tools.argtypes import add_set_arg, fraction, non_negative_int, parse_set, positive_int, seed_list
 from laneshift.tools.studies import allroads
 from laneshift.tools.studies.evaluate import Policy, evaluate_lanes, load_greedy_policy
-from laneshift.tools.studies.protocol_publish import publish, publish_run
+from laneshift.tools.studies.protocol_publish import publish_run
 from laneshift.tools.studies.protocol_results import (TEST_SEED, drivers_on, final_validation_results, render_table,
                                                       summarise)
 from laneshift.tools.studies.protocol_validation import VALIDATION_SEED, plot_validation, validation_curve
@@ -258,7 +258,7 @@ def run_protocol(args: argparse.Namespace) -> dict:
     out_dir, road, configs, states = plan(args)
     out_dir.mkdir(parents=True, exist_ok=True)
     method = args.method
-    runs, published = [], set()
+    runs = []
     with progress(total=len(configs), desc=f"protocol {road} {method}", unit="seed") as bar:
         for seed, cfg in configs.items():
             record = out_dir / f"{method}-s{seed}.json"
@@ -273,9 +273,8 @@ def run_protocol(args: argparse.Namespace) -> dict:
                     write(f"protocol: {method} seed {seed}: the run in {cfg.train.run_dir} finished; "
                           f"evaluating its final network")
                 runs.append(run_seed(cfg, state, args, out_dir, road))
-                if args.publish:  # now: a later seed's run may be stopped before the study's end
-                    published.add(seed)
-                    publish_run(runs[-1], Path(args.publish), road, method)
+            if args.publish:  # each seed as it is done: a later seed's run may be stopped before the study's end
+                publish_run(runs[-1], Path(args.publish), road, method)
             bar.update()
     env_cfg = dataclasses.replace(next(iter(configs.values())).env, max_steps=args.eval_max_steps)
     # Where the drivers' rows are kept: this study's dir, or one that several studies of the same
@@ -293,8 +292,6 @@ def run_protocol(args: argparse.Namespace) -> dict:
     (out_dir / "table.md").write_text(table)
     if plot_validation(results, out_dir) is None:
         write("protocol: curves_validation.png not drawn: no seed has two validation evaluations")
-    if args.publish:  # the seeds done before this command (the ones it trained are published already)
-        publish(results, Path(args.publish), road, skip=published)
     print(table)
     return results
 

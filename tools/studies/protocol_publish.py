@@ -1,4 +1,4 @@
-"""A protocol's final networks published (``publish``): each seed's as
+"""A protocol's final networks published (``publish_run``, one seed's): each seed's as
 ``<road>-<method>-seed<N>-final.safetensors`` with a ``.json`` beside it (command line, git
 revision, resolved config, test table), and for each test rate the ``laneshift eval`` command that
 reproduces it (``eval_command``).
@@ -14,7 +14,7 @@ import os
 import shlex
 import shutil
 from pathlib import Path
-from typing import Callable, Collection
+from typing import Callable
 
 from laneshift.checkpoints import run_checkpoint
 from laneshift.config import EnvConfig
@@ -74,22 +74,12 @@ def publish_final(run: dict, dest: Path, road: str, method: str, label: str,
     return [checkpoint, dest / f"{stem}.json"]
 
 
-def publish(results: dict, dest: Path, road: str, skip: Collection[int] = ()) -> list[Path]:
-    """Each seed's final network as ``dest/<road>-<method>-seed<N>-final.safetensors`` with its
-    provenance and test table beside it (``.json``); allroads: the four roads pooled in ``lanes``
-    (no one command gives them) and per road in ``roads``, with each road's ``laneshift eval``
-    commands. ``skip``: seeds published already."""
-    method, written = results["method"], []
-    for run in results["methods"][method]["runs"]:
-        if run["seed"] not in skip:
-            written += publish_run(run, dest, road, method)
-    return written
-
-
 def publish_run(run: dict, dest: Path, road: str, method: str) -> list[Path]:
-    """One seed's final network and its ``.json`` (``publish``'s files for that seed), from the seed's
-    record (``<method>-s<seed>.json``): the protocol calls it as each seed finishes, so a finished
-    seed's network is published even if a later seed's run is stopped."""
+    """One seed's final network as ``dest/<road>-<method>-seed<N>-final.safetensors`` with its
+    provenance and test table beside it (``.json``), from the seed's record (``<method>-s<seed>.json``);
+    allroads: the four roads pooled in ``lanes`` (no one command gives them) and per road in ``roads``,
+    with each road's ``laneshift eval`` commands. The protocol calls it as each seed finishes, so a
+    finished seed's network is published even if a later seed's run is stopped."""
     return publish_final(run, dest, road, method, "protocol", lambda checkpoint: {
         "test": _test_table(checkpoint, run), "validation": run["validation"]})
 

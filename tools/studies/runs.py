@@ -63,9 +63,8 @@ class _TrainLog(io.StringIO):
 
     def _pretraining(self, line: str) -> None:
         """The pre-training's update count on the bar (a pixel run pre-trains for 40 minutes before
-        its first env step; the bar once stood at 0 all that time), redrawn at the bar's own pace."""
-        if self.bar.disable:  # progress off: a disabled tqdm has no timings to pace by
-            return
+        its first env step; the bar once stood at 0 all that time), redrawn at the bar's own pace
+        (``update(0)``: tqdm redraws when its interval has passed)."""
         m = self._PRETRAINING.search(line)
         if m is not None:
             of = f"/{self.phase1_updates:,}" if self.phase1_updates else ""
@@ -74,9 +73,7 @@ class _TrainLog(io.StringIO):
             self.bar.set_postfix_str("", refresh=False)
         else:
             return
-        if self.bar._time() - self.bar.last_print_t >= self.bar.mininterval:
-            self.bar.refresh()
-            self.bar.last_print_t = self.bar._time()
+        self.bar.update(0)
 
     def _start_at(self, done: int) -> None:
         bar = self.bar
