@@ -51,7 +51,8 @@ def test_a_new_runs_bar_counts_from_zero(monkeypatch):
 
 
 def _phase1_line(updates: int) -> str:
-    return f"[  10.0s] steps       0/150,000 (    0/s) | ep     0 return - | upd {updates:>6,} (50/s) loss 1.0 | v3 phase 1\n"
+    return (f"[  10.0s] steps       0/150,000 (    0/s) | ep     0 return - | upd {updates:>6,} (50/s) loss 1.0"
+            " | v3 phase 1\n")
 
 
 def test_the_bar_shows_the_pre_trainings_updates_before_the_first_env_step(monkeypatch):
