@@ -142,7 +142,10 @@ def default_demo_dir(cfg: RunConfig, episodes: int) -> Path:
         shape += f"-px{env.frame_scale:g}"
     scenario = env.scenario.replace('/', '_') + (f"-{env.road}" if env.road else "")  # allroads pinned to one road
     shield = "-shield" if env.shield else ""  # the driver drove behind the shield
-    name = f"{scenario}-{env.observation}{shape}-p{env.reward_preset}{shield}-scripted-v{ScriptedDriver.VERSION}-{episodes}ep"
+    # Episodes started outside the target lane only are other demonstrations: another shard.
+    start = "" if env.initial_lane == "random" else f"-{env.initial_lane}"
+    name = (f"{scenario}-{env.observation}{shape}-p{env.reward_preset}{shield}{start}"
+            f"-scripted-v{ScriptedDriver.VERSION}-{episodes}ep")
     return Path(cfg.train.run_dir).resolve().parent / "demos" / name
 
 

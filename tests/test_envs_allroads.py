@@ -144,3 +144,16 @@ def test_spec_and_the_default_demo_shards_name():
     cfg = load_run_config(overrides={"env.scenario": "allroads", "env.road": "merge", "train.run_dir": "runs/x"})
     assert default_demo_dir(cfg, 40).name.startswith("allroads-merge-vector86-")
     assert default_demo_dir(cfg.replace(env=EnvConfig(scenario="allroads")), 40).name.startswith("allroads-vector86-")
+
+
+def test_the_default_demo_shard_of_non_target_starts_has_its_own_name():
+    """A run trained from non-target lanes only gets demonstrations started there, never the
+    random-lane shard that another run left in the same folder (or the other way round)."""
+    from laneshift.config import load_run_config
+    from laneshift.deploy.run_dir import default_demo_dir
+
+    random_lane = load_run_config(overrides={"env.scenario": "merge", "train.run_dir": "runs/x"})
+    non_target = load_run_config(overrides={"env.scenario": "merge", "env.initial_lane": "non-target",
+                                            "train.run_dir": "runs/x"})
+    assert "-non-target-" not in default_demo_dir(random_lane, 40).name
+    assert "-non-target-scripted-v" in default_demo_dir(non_target, 40).name
