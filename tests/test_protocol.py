@@ -83,7 +83,7 @@ def test_eval_command_names_every_env_field_eval_has_no_flag_for():
     assert "--observation" not in cmd
 
 
-def test_protocol_trains_tests_publishes_and_skips_a_finished_seed(tmp_path, capsys):
+def test_protocol_trains_tests_publishes_and_skips_a_finished_seed(tmp_path, capsys, monkeypatch):
     from laneshift.tools import cli
 
     out, pub = tmp_path / "proto", tmp_path / "published"
@@ -127,11 +127,14 @@ def test_protocol_trains_tests_publishes_and_skips_a_finished_seed(tmp_path, cap
     again = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert (again["survival_rate"], again["achievement_rate"]) == (lane["survival_rate"], lane["achievement_rate"])
     # The same command again: the seed is done, the baselines are kept; nothing trains.
+    monkeypatch.setenv("LANESHIFT_PROGRESS_S", "0")  # every bar line, at once
     began = time.monotonic()
     args = parser.parse_args(argv)
     assert args.func(args) == 0
-    printed = capsys.readouterr().out
+    printed, bars = capsys.readouterr()
     assert f"protocol: dqfd seed 0: done ({out / 'dqfd-s0.json'}), skipped" in printed
+    # The seed done before is where the bar starts, not a seed done now in no time (no rate, no time left).
+    assert "protocol straight dqfd: 1/1 seed (100 %)" in bars and "?seed/s" in bars
     assert "baselines: kept from" in printed and time.monotonic() - began < 20
     assert json.loads((out / "results.json").read_text())["methods"]["dqfd"]["runs"] == [run]
     # Again with --final-validation-episodes: the done seed's final network and the drivers on the

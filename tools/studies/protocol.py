@@ -259,7 +259,10 @@ def run_protocol(args: argparse.Namespace) -> dict:
     out_dir.mkdir(parents=True, exist_ok=True)
     method = args.method
     runs = []
-    with progress(total=len(configs), desc=f"protocol {road} {method}", unit="seed") as bar:
+    # Seeds done before this command are the bar's start (tqdm's initial), not seeds done now: the
+    # rate and the time left count only the seeds this command trains or evaluates.
+    done_before = sum(state == "done" for state in states.values())
+    with progress(total=len(configs), initial=done_before, desc=f"protocol {road} {method}", unit="seed") as bar:
         for seed, cfg in configs.items():
             record = out_dir / f"{method}-s{seed}.json"
             state = states[seed]
@@ -275,7 +278,8 @@ def run_protocol(args: argparse.Namespace) -> dict:
                 runs.append(run_seed(cfg, state, args, out_dir, road))
             if args.publish:  # each seed as it is done: a later seed's run may be stopped before the study's end
                 publish_run(runs[-1], Path(args.publish), road, method)
-            bar.update()
+            if state != "done":
+                bar.update()
     env_cfg = dataclasses.replace(next(iter(configs.values())).env, max_steps=args.eval_max_steps)
     # Where the drivers' rows are kept: this study's dir, or one that several studies of the same
     # test episodes share (`experiment paper`'s modes), so the drivers drive them once.
