@@ -20,7 +20,7 @@ def test_the_lka_recipe_is_a_method_without_demonstrations():
     assert (cfg.replay.min_size, cfg.replay.samples_per_insert) == (1000, 64.0)
 
 
-def test_lka_protocol_trains_tests_publishes_and_skips_a_finished_seed(tmp_path, capsys):
+def test_lka_protocol_trains_tests_publishes_and_skips_a_finished_seed(tmp_path, capsys, monkeypatch):
     from laneshift.tools import cli
 
     out, pub = tmp_path / "lka", tmp_path / "published"
@@ -49,8 +49,12 @@ def test_lka_protocol_trains_tests_publishes_and_skips_a_finished_seed(tmp_path,
     assert (again["return_mean"], again["survival_rate"]) == (doc["test"]["return_mean"], doc["test"]["survival_rate"])
     assert again["lka_response"]["steering_chatter_deg"] == doc["test"]["response"]["steering_chatter_deg"]
     # The same command again: the seed is done; nothing trains.
+    monkeypatch.setenv("LANESHIFT_PROGRESS_S", "0")  # every bar line, at once
     assert cli.main(argv) == 0
-    assert f"lka: matlab-dqn seed 0: done ({out / 'matlab-dqn-s0.json'}), skipped" in capsys.readouterr().out
+    printed, bars = capsys.readouterr()
+    assert f"lka: matlab-dqn seed 0: done ({out / 'matlab-dqn-s0.json'}), skipped" in printed
+    # The seed done before is where the bar starts, not a seed done now in no time (no rate, no time left).
+    assert "lka protocol matlab-dqn: 1/1 seed (100 %)" in bars and "?seed/s" in bars
     assert json.loads((out / "results.json").read_text())["runs"] == [run]
     # Another budget in the same --out: refused before anything runs, naming the difference.
     other = [("2000" if a == "1500" else a) for a in argv]

@@ -51,6 +51,7 @@ import time
 from pathlib import Path
 
 import yaml
+from tqdm import tqdm
 
 from laneshift.checkpoints import run_checkpoint
 from laneshift.config import METHODS, ConfigError, EnvConfig, RunConfig, load_run_config, method_settings
@@ -254,15 +255,20 @@ def add_final_validation(record_path: Path, cfg: RunConfig, args: argparse.Names
     return record
 
 
+def seeds_progress(states: dict[int, str], desc: str) -> tqdm:
+    """A study's bar over its seeds. The seeds done before this command are its start (tqdm's
+    ``initial``), not seeds done now in no time: call ``update()`` only for a seed that is not
+    ``done``, so the rate and the time left count only the seeds this command trains or evaluates."""
+    return progress(total=len(states), initial=sum(state == "done" for state in states.values()), desc=desc,
+                    unit="seed")
+
+
 def run_protocol(args: argparse.Namespace) -> dict:
     out_dir, road, configs, states = plan(args)
     out_dir.mkdir(parents=True, exist_ok=True)
     method = args.method
     runs = []
-    # Seeds done before this command are the bar's start (tqdm's initial), not seeds done now: the
-    # rate and the time left count only the seeds this command trains or evaluates.
-    done_before = sum(state == "done" for state in states.values())
-    with progress(total=len(configs), initial=done_before, desc=f"protocol {road} {method}", unit="seed") as bar:
+    with seeds_progress(states, f"protocol {road} {method}") as bar:
         for seed, cfg in configs.items():
             record = out_dir / f"{method}-s{seed}.json"
             state = states[seed]
