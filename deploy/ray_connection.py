@@ -13,6 +13,7 @@ import math
 import os
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import tempfile
@@ -215,6 +216,26 @@ def _ray_connect_error(address: str, exc: Exception) -> str:
     last = text.strip().splitlines()[-1] if text.strip() else type(exc).__name__
     return f"cannot connect to Ray at {address}: {last[:300]}"
 
+
+
+def cluster_answers(timeout_s: float = 2.0) -> bool:
+    """Whether the connected cluster's GCS still accepts a connection within ``timeout_s``: False
+    once the head is gone (a signal to the launcher's whole process group took its private head
+    with it, or the head crashed), when no actor can come back and every wait on one would last
+    until Ray's own timeout ends this process (60 s, exit 1, no summary). A TCP connect to the GCS
+    port, not Ray's ``GcsClient``: that one retries for 40 s before it says the GCS is gone.
+    True when this driver cannot tell (Ray Client)."""
+    import ray
+
+    try:
+        host, port = ray.get_runtime_context().gcs_address.rsplit(":", 1)
+    except Exception:  # noqa: BLE001 - a Ray Client driver has no GCS address of its own
+        return True
+    try:
+        with socket.create_connection((host, int(port)), timeout=timeout_s):
+            return True
+    except OSError:
+        return False
 
 def _temp_dir_reaper(path: str) -> subprocess.Popen:
     """A tiny watcher that removes the private Ray temp dir if this launcher is killed with -9

@@ -41,6 +41,13 @@ def summarise(run: RunEnd, why: str, wall: float, out: TextIO) -> dict:
     actors = replay.get("actors", {})
     steps = sum(s["env_steps"] for s in summaries)
     episodes = sum(s["episodes"] for s in summaries)
+    # Workers that ended without their summary (Ray's head went with them): the learner's last
+    # count of stored env steps is then the better figure, said as such.
+    missing = cfg.actor.workers - len(summaries)
+    steps_note = ""
+    if missing > 0 and int(last.get("env_steps") or 0) > steps:
+        steps = int(last["env_steps"])
+        steps_note = f" (the learner's last count: {missing} of {cfg.actor.workers} workers ended without a summary)"
     total = replay.get("actors_total") or {}  # every actor, evicted ones included
     lost_batches = int(total.get("lost_batches", sum(int(a.get("lost_batches", 0)) for a in actors.values())))
     lost_items = int(total.get("lost_items", sum(int(a.get("lost_items", 0)) for a in actors.values())))
@@ -59,7 +66,8 @@ def summarise(run: RunEnd, why: str, wall: float, out: TextIO) -> dict:
         "", "== laneshift run summary ==",
         f"scenario        {cfg.env.scenario} ({cfg.env.observation}), demo mode {cfg.replay.demo_mode}, "
         f"{cfg.train.parallel}, {cfg.actor.workers} workers" + (f"; ended by {why}" if why != "done" else ""),
-        f"env steps       {steps:,} in {wall:.0f} s ({steps / max(wall, 1e-6):.0f} steps/s overall), {episodes} episodes",
+        f"env steps       {steps:,} in {wall:.0f} s ({steps / max(wall, 1e-6):.0f} steps/s overall), "
+        f"{episodes} episodes{steps_note}",
         f"ray nodes       {len(nodes)} ({', '.join(nodes)}): " + ", ".join(
             f"{k} on {v.get('node_ip')}" for k, v in placement.items()),
         f"replay          {replay.get('tables', {}).get('online', {}).get('inserted', '-')} items stored, "
@@ -78,6 +86,9 @@ def summarise(run: RunEnd, why: str, wall: float, out: TextIO) -> dict:
         f"crash rate {_fmt(last.get('crash_rate'))}",
     ]
     final = run_checkpoint(run_dir)
+    # A run cut short before its final checkpoint (Ray's head gone with it) shows the last one it wrote.
+    shown = final if final.exists() or not run_checkpoint(run_dir, "latest").exists() else run_checkpoint(
+        run_dir, "latest")
     result: dict = {"workers": summaries, "learner": last, "wall_s": round(wall, 1), "env_steps": steps,
                     "episodes": episodes, "eval": None, "ended_by": why, "placement": placement,
                     "restarts": dict(run.restarts), "waits": waits, "write_failures": failures,
@@ -93,7 +104,8 @@ def summarise(run: RunEnd, why: str, wall: float, out: TextIO) -> dict:
                                              seed=cfg.train.seed + 12345)
         lines.append(f"greedy eval     {format_result(result['eval'])}")
         record_final_eval(run_dir, steps, result["eval"])
-    lines += [f"run dir         {run_dir}", f"checkpoint      {final}", f"tensorboard     {_tensorboard_command()} --logdir {run_dir / 'tb'}"]
+    lines += [f"run dir         {run_dir}", f"checkpoint      {shown}",
+              f"tensorboard     {_tensorboard_command()} --logdir {run_dir / 'tb'}"]
     print("\n".join(lines), file=out, flush=True)
     return result
 

@@ -4,7 +4,8 @@ actor, every one's ``run()`` called as soon as it answers; then supervised: a co
 ``run()`` fails is waited for while Ray restarts it, its death counted, and ``run()`` called again
 (it resumes from its checkpoint or from what the replay server stored of it); the learner's
 status shown; a stall refused. At the end: workers, learner, replay server and router stopped in
-that order, each with its final checkpoint, and what the summary reads of them (``ended``).
+that order, each with its final checkpoint, and what the summary reads of them (``ended``). Once
+Ray's head no longer answers (``_cluster_gone``), nothing is waited for: the actors ended with it.
 
 Room: deploy, the wiring. May import: the contract, ``deploy``'s own modules, Ray; components
 only through the builder.
@@ -26,6 +27,7 @@ from .builder import Builder
 from .errors import LaunchError
 from .pinning import pin_process_tree
 from .progress_line import Progress
+from .ray_connection import cluster_answers
 from .stop_signals import StopSignals
 from .summary import RunEnd
 
@@ -47,6 +49,7 @@ class Run:
         self.timeline: dict[str, float] = {}  # seconds each start-up stage took
         self.env_spec: dict | None = None  # envspec.spec_to_dict of the run's env, shipped to components
         self.router: Any = None  # the router, when it runs in this process (deploy.router_in)
+        self.cluster_gone = False  # Ray's head no longer answers: nothing left to wait for (_cluster_gone)
 
     # -- start
 
@@ -200,6 +203,8 @@ class Run:
                 self._sweep_services()
                 return "done"
             ready, _ = ray.wait(list(self.refs.values()), num_returns=1, timeout=self.cfg.train.log_every_s)
+            if self.signals.received:  # a death seen now is the signal's doing (it reached the actors too)
+                return self.signals.name
             for ref in ready:
                 name = next(n for n, r in self.refs.items() if r == ref)
                 self._collect(name, ref)
@@ -260,6 +265,8 @@ class Run:
         call run() again: the new process resumes from its checkpoint or the replay server."""
         import ray
 
+        if self._cluster_gone():
+            raise LaunchError(f"{name} died with Ray's head ({_cause(exc)}): {CLUSTER_GONE}")
         limit, wait_s = self.cfg.deploy.max_restarts, self.cfg.deploy.start_timeout_s
         deadline = time.monotonic() + wait_s
         while True:
@@ -303,9 +310,22 @@ class Run:
 
     # -- stop
 
+    def _cluster_gone(self) -> bool:
+        """Whether Ray's head stopped answering (``cluster_answers``), said once; then no component
+        can come back or be stopped, and every wait on one would last until Ray ends this process."""
+        if not self.cluster_gone and not cluster_answers():
+            self.cluster_gone = True
+            self._say(f"train: Ray's head does not answer: {CLUSTER_GONE}")
+        return self.cluster_gone
+
     def stop(self, graceful_s: float = 120.0) -> None:
-        """Workers, then learner (final checkpoint), then replay server (final checkpoint), then router."""
+        """Workers, then learner (final checkpoint), then replay server (final checkpoint), then router.
+        Once Ray's head is gone (``_cluster_gone``, asked before each step), the steps left are skipped."""
         import ray
+
+        if self._cluster_gone():
+            self.close_router()
+            return
 
         def wait(refs: list, timeout: float) -> None:
             if refs:
@@ -323,7 +343,7 @@ class Run:
                     self.summaries[n] = ray.get(self.refs[n], timeout=0)
                 except ray.exceptions.RayError:
                     pass
-        if "learner" in self.handles:
+        if "learner" in self.handles and not self._cluster_gone():
             try:
                 ray.get(self.handles["learner"].stop.remote(), timeout=10)
                 if "learner" in self.refs:
@@ -331,10 +351,11 @@ class Run:
             except ray.exceptions.RayError as exc:
                 self._say(f"train: learner did not stop cleanly: {_cause(exc)}")
         for shard, name in enumerate(self.builder.replay_servers):
-            final = self._stop_replay_server(name, graceful_s) if name in self.handles else None
+            final = (self._stop_replay_server(name, graceful_s) if name in self.handles and not self._cluster_gone()
+                     else None)
             if final is not None:
                 self.replay_finals[self.builder.replay_stats_file(shard)] = final
-        if "router" in self.handles:
+        if "router" in self.handles and not self._cluster_gone():
             try:
                 ray.get(self.handles["router"].stop.remote(), timeout=10)
             except ray.exceptions.RayError:
@@ -374,6 +395,8 @@ class Run:
     def kill_all(self) -> None:
         import ray
 
+        if self.cluster_gone:  # the actors ended with the head; ray.kill would wait on it
+            return
         for handle in self.handles.values():
             try:
                 ray.kill(handle, no_restart=True)
@@ -399,6 +422,12 @@ class Run:
 
     def _say(self, text: str) -> None:
         self.progress.say(text)
+
+
+#: What a run whose Ray head is gone says, once.
+CLUSTER_GONE = ("every component ended with it (a signal to the launcher's whole process group, or the head's "
+                "node died); nothing more can be stopped or saved, and the components' last checkpoints in the "
+                "run dir stand (`--resume` continues from them)")
 
 
 def _cause(exc: BaseException) -> str:

@@ -73,3 +73,26 @@ def test_the_summary_counts_every_failed_write_by_kind_and_says_so(tmp_path):
     summarise(end.__class__(**{**end.__dict__, "learner": {"updates": 1}, "replay": {"actors": {}}}),
               "done", 1.0, quiet)
     assert "write failures" not in quiet.getvalue()
+
+
+def test_a_run_cut_short_with_its_ray_head_says_the_learners_count_and_its_last_checkpoint(tmp_path):
+    """Ray's head gone with the workers (``Run._cluster_gone``): no worker's summary came back, so
+    the env steps are the learner's last count, said as such, and the checkpoint shown is the last
+    one the learner wrote (there is no final one)."""
+    cfg = load_run_config(overrides={"train.run_dir": str(tmp_path), "train.eval_episodes": 5, "actor.workers": 2})
+    (tmp_path / "checkpoints").mkdir()
+    (tmp_path / "checkpoints" / "latest.safetensors").write_bytes(b"weights")
+    learner = {"updates": 5220, "version": 104, "env_steps": 42880}
+    end = RunEnd(cfg=cfg, workers=[], learner=learner, replay={}, where={}, restarts={})
+    out = io.StringIO()
+    result = summarise(end, "SIGTERM", 27.0, out)
+    lines = out.getvalue().splitlines()
+    steps = next(x for x in lines if x.startswith("env steps"))
+    assert steps.startswith("env steps       42,880 in 27 s") and "2 of 2 workers ended without a summary" in steps
+    assert result["env_steps"] == 42880 and result["eval"] is None  # cut short: no greedy evaluation
+    assert next(x for x in lines if x.startswith("checkpoint")).endswith("checkpoints/latest.safetensors")
+    # With every worker's summary, their own counts stand.
+    workers = [{"name": f"w{i}", "env_steps": 21000, "episodes": 3, "batches": 1} for i in range(2)]
+    out = io.StringIO()
+    summarise(end.__class__(**{**end.__dict__, "workers": workers}), "SIGTERM", 27.0, out)
+    assert "env steps       42,000 in 27 s" in out.getvalue() and "without a summary" not in out.getvalue()

@@ -214,26 +214,31 @@ def test_a_router_process_never_imports_numpy():
     assert out.stdout.strip().splitlines()[-1] == "[]"
 
 
-def test_sigint_leaves_no_process_behind(tmp_path):
+def _train_until_it_learns(tmp_path: Path, **popen: object) -> tuple[subprocess.Popen, list[str]]:
+    """``laneshift train --local`` (2 workers, the LKA plant) started and read until its actors,
+    learner and replay server are all working."""
     cmd = [sys.executable, "-m", "laneshift", "train", "--local", "--workers", "2", "--scenario", "lka",
            "--env-steps", "10000000", "--run-dir", str(tmp_path / "run"), "--set", "train.log_every_s=0.5",
            "--set", "learner.hidden=32"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env={**os.environ, "PYTHONUNBUFFERED": "1"}, **popen)
+    lines = []
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        line = proc.stdout.readline()
+        lines.append(line)
+        if " upd " in line and "steps       0/" not in line:
+            return proc, lines  # actors, learner and replay server are all working
+    proc.kill()
+    pytest.fail("training never started:\n" + "".join(lines))
+
+
+def test_sigint_leaves_no_process_behind(tmp_path):
     # SIGINT at its default in the child: a test run started in the background from a
     # non-interactive shell inherits SIGINT ignored (POSIX), and Python then never raises
     # KeyboardInterrupt, which is right for a background job but not what this test is about.
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            env={**os.environ, "PYTHONUNBUFFERED": "1"},
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    lines = []
+    proc, lines = _train_until_it_learns(tmp_path, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline:
-            line = proc.stdout.readline()
-            lines.append(line)
-            if " upd " in line and "steps       0/" not in line:
-                break  # actors, learner and replay server are all working
-        else:
-            pytest.fail("training never started:\n" + "".join(lines))
         family = _descendants(proc.pid)
         assert len(family) >= 5, family  # replay server, learner, Ray's processes and workers
         # What keeps a run's peak memory down (`laneshift bench run`): no log monitor, autoscaler
@@ -259,6 +264,33 @@ def test_sigint_leaves_no_process_behind(tmp_path):
         if proc.poll() is None:
             proc.kill()
 
+
+
+def test_sigterm_to_the_whole_process_group_ends_the_run(tmp_path):
+    """``timeout``, a CI runner or a closed terminal signals the run's whole process group: its
+    private Ray head (gcs, raylet) and every actor get the SIGTERM too and are gone while the
+    launcher stops the run. The stop then finds each component dead with no Ray to bring it back:
+    it says so in one line each and ends, not waiting for a restart that cannot come."""
+    proc, lines = _train_until_it_learns(tmp_path, start_new_session=True)
+    try:
+        family = _descendants(proc.pid)
+        started = time.monotonic()
+        os.killpg(proc.pid, signal.SIGTERM)
+        rest, _ = proc.communicate(timeout=150)
+        took = time.monotonic() - started
+        assert proc.returncode == 143, "".join(lines) + rest
+        assert "SIGTERM received; stopping gracefully" in rest, rest
+        assert took < 50, f"the stop took {took:.0f} s:\n{rest}"  # before Ray's 60 s without its GCS end it
+        assert "train: Ray's head does not answer: every component ended with it" in rest, rest
+        summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+        assert summary["ended_by"] == "SIGTERM" and summary["env_steps"] > 0, summary
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and any(_alive(p) for p in family):
+            time.sleep(0.2)
+        assert not [p for p in family if _alive(p)], "processes left behind"
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
 
 def test_cluster_mode_spreads_workers_over_two_ray_nodes(tmp_path, monkeypatch):
     """``laneshift train --cluster ADDRESS`` against a real two-node Ray cluster (two raylets
