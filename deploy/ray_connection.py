@@ -139,6 +139,9 @@ class RayConnection:
         if ray.is_initialized():
             ray.shutdown()
         if self.temp_dir is not None:
+            # Ray's shutdown ends its processes through the head; with the head gone before it
+            # (Run._cluster_gone), the actors would live on for up to a minute, holding their logs here.
+            end_processes_holding(self.temp_dir)
             shutil.rmtree(self.temp_dir, ignore_errors=True)
         if self._reaper is not None:
             self._reaper.terminate()
@@ -237,6 +240,31 @@ def cluster_answers(timeout_s: float = 2.0) -> bool:
     except OSError:
         return False
 
+def end_processes_holding(d: str, tries: int = 20) -> None:
+    """SIGKILL every other process that holds a file open under the private Ray temp dir ``d``
+    (only Ray's, of this launcher's cluster), until none does. Its source is also the reaper's
+    clean-up (``_temp_dir_reaper``), so it uses the standard library alone."""
+    for _ in range(tries):
+        left = []
+        for q in os.listdir("/proc"):
+            if not q.isdigit() or int(q) == os.getpid():
+                continue
+            try:
+                fds = [os.readlink(f"/proc/{q}/fd/{f}") for f in os.listdir(f"/proc/{q}/fd")]
+            except OSError:
+                continue
+            if any(f.startswith(d + "/") for f in fds):
+                left.append(int(q))
+        if not left:
+            return
+        for q in left:
+            try:
+                os.kill(q, signal.SIGKILL)
+            except OSError:
+                pass
+        time.sleep(0.5)
+
+
 def _temp_dir_reaper(path: str) -> subprocess.Popen:
     """A tiny watcher that removes the private Ray temp dir if this launcher is killed with -9
     (Ray's own processes die with it: they are started with the parent-death signal)."""
@@ -247,22 +275,8 @@ def _temp_dir_reaper(path: str) -> subprocess.Popen:
     # Ray's dashboard and runtime-env agents do not die with the launcher: the clean-up ends every
     # process that holds a file open under this run's private temp dir (only Ray's, started by us;
     # their command lines are rewritten to "ray::DashboardAgent", so they are found by their logs).
-    code = ("import os,shutil,signal,sys,time\n"
-            "d=sys.argv[1]\n"
-            "time.sleep(2)\n"
-            "for _ in range(20):\n"
-            "    left=[]\n"
-            "    for q in os.listdir('/proc'):\n"
-            "        if not q.isdigit() or int(q)==os.getpid(): continue\n"
-            "        try: fds=[os.readlink(f'/proc/{q}/fd/{f}') for f in os.listdir(f'/proc/{q}/fd')]\n"
-            "        except OSError: continue\n"
-            "        if any(f.startswith(d+'/') for f in fds): left.append(int(q))\n"
-            "    if not left: break\n"
-            "    for q in left:\n"
-            "        try: os.kill(q,signal.SIGKILL)\n"
-            "        except OSError: pass\n"
-            "    time.sleep(0.5)\n"
-            "shutil.rmtree(d,ignore_errors=True)\n")
+    code = ("import os,shutil,signal,sys,time\n" + inspect.getsource(end_processes_holding)
+            + "time.sleep(2)\nend_processes_holding(sys.argv[1])\nshutil.rmtree(sys.argv[1],ignore_errors=True)\n")
     return subprocess.Popen(["/bin/sh", "-c", wait, "laneshift-ray-reaper", str(os.getpid()), path,
                              sys.executable, "-c", code, path], stdin=subprocess.DEVNULL,
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)

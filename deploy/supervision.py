@@ -195,9 +195,21 @@ class Run:
 
         d = self.cfg.deploy
         last_move, last_mark = time.monotonic(), None
+        next_probe, head_silent_since = time.monotonic() + HEAD_PROBE_S, None
         while True:
             if self.signals.received:
                 return self.signals.name
+            if time.monotonic() >= next_probe:
+                # The actors go on talking to each other without the head, so only asking it finds
+                # it gone; a GCS restarting (fault tolerance on a cluster) is given HEAD_LOST_S.
+                next_probe = time.monotonic() + HEAD_PROBE_S
+                if cluster_answers():
+                    head_silent_since = None
+                elif head_silent_since is None:
+                    head_silent_since = time.monotonic()
+                elif time.monotonic() - head_silent_since >= HEAD_LOST_S:
+                    self.cluster_gone = True
+                    raise LaunchError(f"Ray's head has not answered for {HEAD_LOST_S:.0f} s: {CLUSTER_GONE}")
             workers_left = [n for n in self.builder.workers if n not in self.summaries]
             if not workers_left:
                 self._sweep_services()
@@ -424,6 +436,10 @@ class Run:
         self.progress.say(text)
 
 
+#: How often the supervision asks whether Ray's head still answers, and for how long it may not
+#: before the run ends: under the 60 s after which Ray's driver ends itself without its GCS (exit 1,
+#: no line of ours), over a GCS restart's few seconds.
+HEAD_PROBE_S, HEAD_LOST_S = 5.0, 20.0
 #: What a run whose Ray head is gone says, once.
 CLUSTER_GONE = ("every component ended with it (a signal to the launcher's whole process group, or the head's "
                 "node died); nothing more can be stopped or saved, and the components' last checkpoints in the "

@@ -292,6 +292,36 @@ def test_sigterm_to_the_whole_process_group_ends_the_run(tmp_path):
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
 
+
+def test_a_head_that_dies_mid_run_ends_the_run_in_one_line(tmp_path):
+    """The head's GCS and raylet killed (its node crashed): the actors go on talking to each other
+    and the learner, so only asking the head finds it gone. The run ends in one line within
+    ``HEAD_LOST_S`` and a probe, before Ray's driver would end itself 60 s after losing its GCS
+    (exit 1 with none of laneshift's words), and leaves no process behind."""
+    from laneshift.deploy.supervision import HEAD_LOST_S, HEAD_PROBE_S
+
+    proc, lines = _train_until_it_learns(tmp_path, start_new_session=True)
+    try:
+        family = _descendants(proc.pid)
+        head = [p for p in family if process_label(p, proc.pid) in ("ray gcs", "ray raylet")]
+        assert len(head) == 2, [process_label(p, proc.pid) for p in family]
+        started = time.monotonic()
+        for pid in head:
+            os.kill(pid, signal.SIGKILL)
+        rest, _ = proc.communicate(timeout=120)
+        took = time.monotonic() - started
+        assert proc.returncode == 1, "".join(lines) + rest
+        assert f"train: Ray's head has not answered for {HEAD_LOST_S:.0f} s: every component ended" in rest, rest
+        assert took < HEAD_LOST_S + 2 * HEAD_PROBE_S + 15 < 60, f"it took {took:.0f} s:\n{rest}"
+        assert "Failed to connect to GCS" not in rest, rest
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and any(_alive(p) for p in family):
+            time.sleep(0.2)
+        assert not [p for p in family if _alive(p)], "processes left behind"
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+
 def test_cluster_mode_spreads_workers_over_two_ray_nodes(tmp_path, monkeypatch):
     """``laneshift train --cluster ADDRESS`` against a real two-node Ray cluster (two raylets
     with one CPU each, as ``ray.cluster_utils`` runs them on one machine): one worker lands on each
