@@ -305,7 +305,7 @@ def _steps_per_s(run_dir: Path) -> float:
 @pytest.mark.chaos  # two local runs of ~45 s each
 def test_slow_jittery_link_to_the_workers(tmp_path):
     router_port = free_tcp_port()
-    with netfaults.LinkProxy(router_port, latency_s=0.05, jitter_s=0.02, reset_every_s=15.0, seed=1) as proxy:
+    with netfaults.LinkProxy(router_port, latency_s=0.05, jitter_s=0.02, reset_every_s=6.0, seed=1) as proxy:
         slow_dir = tmp_path / "slow"
         rc, text, wall = _local_run(slow_dir, {"deploy.router_port": router_port,
                                                "deploy.worker_router": proxy.endpoint})
@@ -322,8 +322,9 @@ def test_slow_jittery_link_to_the_workers(tmp_path):
     stored_at = netfaults.learner_series(slow_dir)
     moving = [t for t, s, _ in stored_at if 0 < s < made]
     in_training = [t for t, _n in resets if moving and moving[0] <= t <= moving[-1]]
-    # The proxy's clock starts when the first worker connects: with ~20 s of training, the reset
-    # at +15 s falls into it (a run too short for any would test only the latency).
+    # The proxy's clock starts when the first worker connects: a reset every 6 s falls into the
+    # 10-20 s of storing (a run too short for any would test only the latency; with one every 15 s,
+    # a fast day's 10 s of storing had none).
     assert in_training, (f"no connection reset while env steps were being stored: resets {resets}, "
                          f"storing from {moving[:1]} to {moving[-1:]}")
     # A reconnected worker goes on: the connections after the resets carried data.
