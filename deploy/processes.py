@@ -119,3 +119,35 @@ def descendants(pid: int) -> set[int]:
                 found.add(child)
                 todo.append(child)
     return found
+
+
+def processes_holding(d: str) -> list[int]:
+    """The other processes that hold a file open under the directory ``d``. Standard library
+    alone: its source is also the private Ray temp dir reaper's (``ray_connection._temp_dir_reaper``)."""
+    left = []
+    for q in os.listdir("/proc"):
+        if not q.isdigit() or int(q) == os.getpid():
+            continue
+        try:
+            fds = [os.readlink(f"/proc/{q}/fd/{f}") for f in os.listdir(f"/proc/{q}/fd")]
+        except OSError:
+            continue
+        if any(f.startswith(d + "/") for f in fds):
+            left.append(int(q))
+    return left
+
+
+def end_processes_holding(d: str, tries: int = 20) -> None:
+    """SIGKILL every other process that holds a file open under ``d`` (the launcher's private Ray
+    temp dir: only Ray's processes of its own cluster), until none does; as ``processes_holding``,
+    the reaper runs its source."""
+    for _ in range(tries):
+        left = processes_holding(d)
+        if not left:
+            return
+        for q in left:
+            try:
+                os.kill(q, signal.SIGKILL)
+            except OSError:
+                pass
+        time.sleep(0.5)

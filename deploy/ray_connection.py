@@ -12,7 +12,6 @@ import inspect
 import math
 import os
 import shutil
-import signal
 import socket
 import subprocess
 import sys
@@ -24,6 +23,7 @@ from typing import Any
 from laneshift.config import RunConfig
 
 from .errors import LaunchError
+from .processes import end_processes_holding, processes_holding
 
 
 @contextlib.contextmanager
@@ -240,30 +240,6 @@ def cluster_answers(timeout_s: float = 2.0) -> bool:
     except OSError:
         return False
 
-def end_processes_holding(d: str, tries: int = 20) -> None:
-    """SIGKILL every other process that holds a file open under the private Ray temp dir ``d``
-    (only Ray's, of this launcher's cluster), until none does. Its source is also the reaper's
-    clean-up (``_temp_dir_reaper``), so it uses the standard library alone."""
-    for _ in range(tries):
-        left = []
-        for q in os.listdir("/proc"):
-            if not q.isdigit() or int(q) == os.getpid():
-                continue
-            try:
-                fds = [os.readlink(f"/proc/{q}/fd/{f}") for f in os.listdir(f"/proc/{q}/fd")]
-            except OSError:
-                continue
-            if any(f.startswith(d + "/") for f in fds):
-                left.append(int(q))
-        if not left:
-            return
-        for q in left:
-            try:
-                os.kill(q, signal.SIGKILL)
-            except OSError:
-                pass
-        time.sleep(0.5)
-
 
 def _temp_dir_reaper(path: str) -> subprocess.Popen:
     """A tiny watcher that removes the private Ray temp dir if this launcher is killed with -9
@@ -275,7 +251,8 @@ def _temp_dir_reaper(path: str) -> subprocess.Popen:
     # Ray's dashboard and runtime-env agents do not die with the launcher: the clean-up ends every
     # process that holds a file open under this run's private temp dir (only Ray's, started by us;
     # their command lines are rewritten to "ray::DashboardAgent", so they are found by their logs).
-    code = ("import os,shutil,signal,sys,time\n" + inspect.getsource(end_processes_holding)
+    code = ("import os,shutil,signal,sys,time\n" + inspect.getsource(processes_holding)
+            + inspect.getsource(end_processes_holding)
             + "time.sleep(2)\nend_processes_holding(sys.argv[1])\nshutil.rmtree(sys.argv[1],ignore_errors=True)\n")
     return subprocess.Popen(["/bin/sh", "-c", wait, "laneshift-ray-reaper", str(os.getpid()), path,
                              sys.executable, "-c", code, path], stdin=subprocess.DEVNULL,

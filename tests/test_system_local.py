@@ -233,6 +233,14 @@ def _train_until_it_learns(tmp_path: Path, **popen: object) -> tuple[subprocess.
     pytest.fail("training never started:\n" + "".join(lines))
 
 
+def _assert_none_left(family: set[int]) -> None:
+    """Every process of a run's family ends within 30 s of its launcher."""
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and any(_alive(p) for p in family):
+        time.sleep(0.2)
+    assert not [p for p in family if _alive(p)], "processes left behind"
+
+
 def test_sigint_leaves_no_process_behind(tmp_path):
     # SIGINT at its default in the child: a test run started in the background from a
     # non-interactive shell inherits SIGINT ignored (POSIX), and Python then never raises
@@ -256,10 +264,7 @@ def test_sigint_leaves_no_process_behind(tmp_path):
         rest, _ = proc.communicate(timeout=90)
         assert proc.returncode == 130, "".join(lines) + rest
         assert "SIGINT received; stopping gracefully" in rest
-        deadline = time.monotonic() + 30
-        while time.monotonic() < deadline and any(_alive(p) for p in family):
-            time.sleep(0.2)
-        assert not [p for p in family if _alive(p)], "processes left behind"
+        _assert_none_left(family)
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -284,10 +289,7 @@ def test_sigterm_to_the_whole_process_group_ends_the_run(tmp_path):
         assert "train: Ray's head does not answer: every component ended with it" in rest, rest
         summary = json.loads((tmp_path / "run" / "summary.json").read_text())
         assert summary["ended_by"] == "SIGTERM" and summary["env_steps"] > 0, summary
-        deadline = time.monotonic() + 30
-        while time.monotonic() < deadline and any(_alive(p) for p in family):
-            time.sleep(0.2)
-        assert not [p for p in family if _alive(p)], "processes left behind"
+        _assert_none_left(family)
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
@@ -314,13 +316,11 @@ def test_a_head_that_dies_mid_run_ends_the_run_in_one_line(tmp_path):
         assert f"train: Ray's head has not answered for {HEAD_LOST_S:.0f} s: every component ended" in rest, rest
         assert took < HEAD_LOST_S + 2 * HEAD_PROBE_S + 15 < 60, f"it took {took:.0f} s:\n{rest}"
         assert "Failed to connect to GCS" not in rest, rest
-        deadline = time.monotonic() + 30
-        while time.monotonic() < deadline and any(_alive(p) for p in family):
-            time.sleep(0.2)
-        assert not [p for p in family if _alive(p)], "processes left behind"
+        _assert_none_left(family)
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
+
 
 def test_cluster_mode_spreads_workers_over_two_ray_nodes(tmp_path, monkeypatch):
     """``laneshift train --cluster ADDRESS`` against a real two-node Ray cluster (two raylets

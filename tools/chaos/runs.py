@@ -25,7 +25,7 @@ from pathlib import Path
 
 from laneshift.config import load_run_config
 
-from laneshift.deploy.processes import descendants
+from laneshift.deploy.processes import descendants, processes_holding
 
 from .faults import FAST, FAULTS
 from .strikes import FaultInjector, LinkFault, ReadOnlyRunDir, StatsFlood, checkpointing, logged_env_steps
@@ -272,14 +272,4 @@ def alive(pid: int) -> bool:
 
 def _ray_processes(run_dir: Path) -> list[int]:
     """Processes still holding a file of this run open (actors log into the run dir)."""
-    left = []
-    for q in os.listdir("/proc"):
-        if not q.isdigit() or int(q) == os.getpid():
-            continue
-        try:
-            fds = [os.readlink(f"/proc/{q}/fd/{f}") for f in os.listdir(f"/proc/{q}/fd")]
-        except OSError:
-            continue
-        if any(f.startswith(str(run_dir) + "/") for f in fds):
-            left.append(int(q))
-    return left
+    return processes_holding(str(run_dir))
