@@ -2,7 +2,7 @@
 reaped with the launcher) or a running cluster (``--cluster``, ``RAY_ADDRESS``), with one clear
 line when it cannot be reached.
 
-Room: deploy, the wiring. May import: the contract and Ray.
+Room: deploy, the wiring. May import: the contract, ``deploy.processes`` and Ray.
 """
 
 from __future__ import annotations
@@ -218,7 +218,6 @@ def _ray_connect_error(address: str, exc: Exception) -> str:
                 f"head prints it; docs/deploy.md), then retry")
     last = text.strip().splitlines()[-1] if text.strip() else type(exc).__name__
     return f"cannot connect to Ray at {address}: {last[:300]}"
-
 
 
 def cluster_answers(timeout_s: float = 2.0) -> bool:
