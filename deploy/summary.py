@@ -87,8 +87,8 @@ def summarise(run: RunEnd, why: str, wall: float, out: TextIO) -> dict:
     ]
     final = run_checkpoint(run_dir)
     # A run cut short before its final checkpoint (Ray's head gone with it) shows the last one it wrote.
-    shown = final if final.exists() or not run_checkpoint(run_dir, "latest").exists() else run_checkpoint(
-        run_dir, "latest")
+    latest = run_checkpoint(run_dir, "latest")
+    shown = latest if not final.exists() and latest.exists() else final
     result: dict = {"workers": summaries, "learner": last, "wall_s": round(wall, 1), "env_steps": steps,
                     "episodes": episodes, "eval": None, "ended_by": why, "placement": placement,
                     "restarts": dict(run.restarts), "waits": waits, "write_failures": failures,

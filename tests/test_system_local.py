@@ -270,7 +270,6 @@ def test_sigint_leaves_no_process_behind(tmp_path):
             proc.kill()
 
 
-
 def test_sigterm_to_the_whole_process_group_ends_the_run(tmp_path):
     """``timeout``, a CI runner or a closed terminal signals the run's whole process group: its
     private Ray head (gcs, raylet) and every actor get the SIGTERM too and are gone while the
