@@ -195,12 +195,63 @@ def test_a_finished_seed_is_published_before_the_next_seed_runs(tmp_path, monkey
     assert not (pub / "straight-dqfd-seed1-final.safetensors").exists() and not (out / "results.json").exists()
 
 
+def test_a_held_test_drives_validation_episodes_only_until_the_same_command_without_it(tmp_path, monkeypatch, capsys):
+    """A probe (``--hold-test``) trains and validates each seed and drives no test episode, so no
+    test rate exists while its choice is open; the same command without it then drives the test
+    episodes of the validated seed, training nothing."""
+    from laneshift.tools import cli
+    from laneshift.tools.studies import protocol
+
+    out = tmp_path / "proto"
+    argv = ["experiment", "protocol", "--scenario", "straight", "--method", "dqfd", "--seeds", "0",
+            "--env-steps", "400", "--test-episodes", "2", "--eval-max-steps", "30", "--validation-every", "0",
+            "--final-validation-episodes", "2", "--out", str(out), *TINY]
+    driven, evaluate = [], protocol.evaluate_final
+
+    def spied(greedy, env_cfg, episodes, episode_seed, label):
+        driven.append(episode_seed)
+        return evaluate(greedy, env_cfg, episodes, episode_seed, label)
+
+    monkeypatch.setattr(protocol, "evaluate_final", spied)
+    assert cli.main([*argv, "--hold-test"]) == 0
+    printed = capsys.readouterr().out
+    assert driven == [VALIDATION_SEED]  # the final network on validation episodes, never on the test's
+    record = json.loads((out / "dqfd-s0.json").read_text())
+    assert record["test_held"] is True and "eval" not in record
+    assert record["final_validation"]["episode_seed"] == VALIDATION_SEED
+    results = json.loads((out / "results.json").read_text())
+    assert results["test_held"] is True and results["test"]["episode_seed"] == VALIDATION_SEED
+    (run,) = results["methods"]["dqfd"]["runs"]
+    assert run["eval"] == record["final_validation"]["eval"]
+    assert results["baselines"]["scripted"]["random"]["survival"]["episodes"] == 2
+    table = (out / "table.md").read_text()
+    assert "**Test held**" in table and "100,000" not in table and "100,000" not in printed
+    assert not (out / "baselines.json").exists() and (out / "baselines-validation.json").is_file()
+    # Again with the test held: the validated seed is skipped, nothing is driven.
+    assert cli.main([*argv, "--hold-test"]) == 0
+    assert "seed 0: validated" in capsys.readouterr().out and driven == [VALIDATION_SEED]
+    # The same command without it: the test episodes now, nothing trained again.
+    log = (out / "dqfd-s0.log").read_text()
+    assert cli.main(argv) == 0
+    assert driven == [VALIDATION_SEED, 100_000] and (out / "dqfd-s0.log").read_text() == log
+    tested = json.loads((out / "dqfd-s0.json").read_text())
+    assert "test_held" not in tested and tested["eval"]["random"]["episodes"] == 2
+    assert tested["final_validation"] == record["final_validation"]
+    results = json.loads((out / "results.json").read_text())
+    assert "test_held" not in results and results["test"]["episode_seed"] == 100_000
+    assert results["final_validation"]["test"]["episode_seed"] == VALIDATION_SEED
+    assert "**Test held**" not in (out / "table.md").read_text()
+
+
 def test_bad_input_fails_before_any_run(tmp_path, capsys):
     from laneshift.tools import cli
 
     for argv, needle in ((["--method", "dqfq"], "--method: unknown 'dqfq'"), (["--seeds", "0,0"], "named twice"),
                          (["--set", "learner.lr=fast"], "learner.lr"), (["--road", "a/b"], "--road"),
-                         (["--scenario", "allroads", "--set", "env.road=merge"], "leave env.road empty")):
+                         (["--scenario", "allroads", "--set", "env.road=merge"], "leave env.road empty"),
+                         (["--hold-test"], "give --final-validation-episodes"),
+                         (["--hold-test", "--final-validation-episodes", "2", "--publish", str(tmp_path / "pub")],
+                          "published with its test table")):
         assert cli.main(["experiment", "protocol", "--out", str(tmp_path / "p"), *argv]) == 2
         assert needle in capsys.readouterr().err
     assert not (tmp_path / "p").exists()

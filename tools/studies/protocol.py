@@ -28,7 +28,11 @@ revision, resolved config, test table and the ``laneshift eval`` commands that r
 ``--final-validation-episodes N`` also evaluates each final network, and the drivers, on N
 validation episodes per initial-lane setting (seeds from 200,000; allroads: on each road): the
 numbers to choose between recipes or settings on, so that the test episodes serve no choice. The
-same command again with it adds them to seeds already done.
+same command again with it adds them to seeds already done. ``--hold-test`` (a probe): each seed is
+trained and its final network driven on those validation episodes only; the test episodes are not
+driven, so no test rate is printed or written while the choice is open; table.md and results.json hold
+the validation rates (``test_held``). The same command without ``--hold-test`` then drives the test
+episodes of the seeds validated before, training nothing.
 
 ``--scenario allroads`` trains one network for the four roads and tests it on each road's own test
 episodes (the single-road protocol's, the road pinned with ``env.road``), the drivers on the same
@@ -60,8 +64,8 @@ from laneshift.tools.argtypes import add_set_arg, fraction, non_negative_int, pa
 from laneshift.tools.studies import allroads
 from laneshift.tools.studies.evaluate import Policy, evaluate_lanes, load_greedy_policy
 from laneshift.tools.studies.protocol_publish import publish_run
-from laneshift.tools.studies.protocol_results import (TEST_SEED, drivers_on, final_validation_results, render_table,
-                                                      summarise)
+from laneshift.tools.studies.protocol_results import (TEST_SEED, drivers_on, final_validation_results,
+                                                      held_test_summary, render_table, summarise)
 from laneshift.tools.studies.protocol_validation import VALIDATION_SEED, plot_validation, validation_curve
 from laneshift.tools.studies.provenance import command_line, git_revision, write_json
 from laneshift.tools.studies.runs import method_config, train_logged
@@ -84,10 +88,15 @@ def held_out(args: argparse.Namespace, env: EnvConfig) -> dict:
 
 
 def seed_state(run_dir: Path, record: Path) -> str:
-    """``done`` (its json exists), ``trained`` (the run finished, not evaluated yet), ``resume``
-    (a run stopped unfinished) or ``new``."""
+    """``done`` (its json exists), ``validated`` (its json exists, its test episodes held: not driven
+    yet), ``trained`` (the run finished, not evaluated yet), ``resume`` (a run stopped unfinished) or
+    ``new``."""
     if record.is_file():
-        return "done"
+        try:
+            held = json.loads(record.read_text()).get("test_held", False)
+        except (OSError, ValueError, AttributeError):
+            held = False  # check_same_protocol says what is wrong with it
+        return "validated" if held else "done"
     if not (run_dir / "config.yaml").is_file():
         return "new"
     try:
@@ -129,6 +138,12 @@ def plan(args: argparse.Namespace) -> tuple[Path, str, dict[int, RunConfig], dic
     gets its saved config with this command's settings on top (as ``laneshift train --resume``)."""
     user = parse_set(args.set)
     seeds = checked_seeds(args)
+    if args.hold_test and not args.final_validation_episodes:
+        raise ConfigError("--hold-test: the seeds are then judged on validation episodes only; give "
+                          "--final-validation-episodes N (e.g. 200)")
+    if args.hold_test and args.publish:
+        raise ConfigError("--hold-test: a network is published with its test table; publish with the command "
+                          "that drives the test episodes (the same without --hold-test)")
     if TEST_SEED + args.test_episodes > VALIDATION_SEED:
         raise ConfigError(f"--test-episodes: at most {VALIDATION_SEED - TEST_SEED:,} (the test episodes' seeds "
                           f"from {TEST_SEED:,} would reach the validation episodes' from {VALIDATION_SEED:,})")
@@ -157,7 +172,7 @@ def plan(args: argparse.Namespace) -> tuple[Path, str, dict[int, RunConfig], dic
     for seed in seeds:
         run_dir, record = out_dir / f"{args.method}-s{seed}", out_dir / f"{args.method}-s{seed}.json"
         states[seed] = seed_state(run_dir, record)
-        if states[seed] == "done":
+        if states[seed] in ("done", "validated"):
             check_same_protocol(seed, record, test, args.env_steps)
         seed_base = base
         if states[seed] == "resume":
@@ -183,8 +198,9 @@ def train_seed(cfg: RunConfig, state: str, out_dir: Path, method: str) -> None:
 
 
 def run_seed(cfg: RunConfig, state: str, args: argparse.Namespace, out_dir: Path, road: str) -> dict:
-    """Train (or continue) one seed's run, evaluate its final network on the test episodes, write
-    and return its ``<method>-s<seed>.json``."""
+    """Train (or continue) one seed's run, evaluate its final network on the validation episodes
+    (``--final-validation-episodes``) and, unless ``--hold-test``, on the test episodes; write and
+    return its ``<method>-s<seed>.json``."""
     seed, method = cfg.train.seed, args.method
     run_dir = Path(cfg.train.run_dir)
     started = time.monotonic()
@@ -193,8 +209,6 @@ def run_seed(cfg: RunConfig, state: str, args: argparse.Namespace, out_dir: Path
     test_env = dataclasses.replace(cfg.env, max_steps=args.eval_max_steps)
     final_validation = validate_final(greedy, test_env, args.final_validation_episodes,
                                       f"validate {method} seed {seed}")
-    tested = evaluate_final(greedy, test_env, args.test_episodes, TEST_SEED, f"test {method} seed {seed}")
-    evals, by_road = tested["eval"], tested.get("eval_by_road")
     try:
         summary = json.loads((run_dir / "summary.json").read_text())
     except (OSError, ValueError):
@@ -204,18 +218,46 @@ def run_seed(cfg: RunConfig, state: str, args: argparse.Namespace, out_dir: Path
     record = {"seed": seed, "method": method, "road": road, "run_dir": str(run_dir),
               "resumed": state == "resume", "wall_s": round(time.monotonic() - started, 1),
               "train_wall_s": summary.get("wall_s"), "env_steps": summary.get("env_steps") or cfg.train.env_steps,
-              "test": held_out(args, cfg.env),
-              **tested,
+              "test": held_out(args, cfg.env), "test_held": True,
               "validation": {"episode_seed": t.get("validation_seed"), "every": t["eval_every"],
                              "episodes": t["periodic_eval_episodes"], "curve": validation_curve(run_dir)},
               **({"final_validation": final_validation} if final_validation else {}),
               "command": command_line(), "git": git_revision(), "config": config}
+    if args.hold_test:
+        write_json(out_dir / f"{method}-s{seed}.json", record)
+        say_rates(f"{method} seed {seed} (validation episodes; test held)", final_validation)
+        return record
+    return test_seed(record, greedy, test_env, args, out_dir)
+
+
+def test_seed(record: dict, greedy: Policy, test_env: EnvConfig, args: argparse.Namespace, out_dir: Path) -> dict:
+    """A seed's record with its final network's rates on the test episodes (``eval``; allroads
+    ``eval_by_road`` too) and ``test_held`` gone, written as ``<method>-s<seed>.json`` and returned."""
+    seed, method = record["seed"], record["method"]
+    tested = evaluate_final(greedy, test_env, args.test_episodes, TEST_SEED, f"test {method} seed {seed}")
+    record = {k: v for k, v in record.items() if k != "test_held"}
+    at = list(record).index("test") + 1  # the rates beside the episodes they are of
+    record = {**dict(list(record.items())[:at]), **tested, **dict(list(record.items())[at:])}
+    record["command"] = command_line()  # the command that drove the test episodes
     write_json(out_dir / f"{method}-s{seed}.json", record)
+    say_rates(f"{method} seed {seed}", tested)
+    return record
+
+
+def test_validated_seed(record_path: Path, cfg: RunConfig, args: argparse.Namespace, out_dir: Path) -> dict:
+    """A seed validated before with its test held: its final network on the test episodes now."""
+    record = add_final_validation(record_path, cfg, args)
+    greedy = load_greedy_policy(run_checkpoint(cfg.train.run_dir))
+    return test_seed(record, greedy, dataclasses.replace(cfg.env, max_steps=args.eval_max_steps), args, out_dir)
+
+
+def say_rates(what: str, evaluated: dict) -> None:
+    """One line per evaluation of a final network (allroads: its roads on one line)."""
+    evals, by_road = evaluated["eval"], evaluated.get("eval_by_road")
     for where, lanes in ({"": evals} if by_road is None else {f"{r}, ": e for r, e in by_road.items()}).items():
-        write(f"protocol: {method} seed {seed}: {where}" + ", ".join(
+        write(f"protocol: {what}: {where}" + ", ".join(
             f"{lane} survival {e['survival_rate']:.1%} achievement {e['achievement_rate']:.1%}"
             for lane, e in lanes.items()))
-    return record
 
 
 def evaluate_final(greedy: Policy, env_cfg: EnvConfig, episodes: int, episode_seed: int, label: str) -> dict:
@@ -255,11 +297,12 @@ def add_final_validation(record_path: Path, cfg: RunConfig, args: argparse.Names
     return record
 
 
-def seeds_progress(states: dict[int, str], desc: str) -> tqdm:
-    """A study's bar over its seeds. The seeds done before this command are its start (tqdm's
-    ``initial``), not seeds done now in no time: call ``update()`` only for a seed that is not
-    ``done``, so the rate and the time left count only the seeds this command trains or evaluates."""
-    return progress(total=len(states), initial=sum(state == "done" for state in states.values()), desc=desc,
+def seeds_progress(states: dict[int, str], desc: str, finished: tuple[str, ...] = ("done",)) -> tqdm:
+    """A study's bar over its seeds. The seeds finished before this command (``finished``: their
+    states) are its start (tqdm's ``initial``), not seeds done now in no time: call ``update()`` only
+    for the others, so the rate and the time left count only the seeds this command trains or
+    evaluates."""
+    return progress(total=len(states), initial=sum(state in finished for state in states.values()), desc=desc,
                     unit="seed")
 
 
@@ -268,13 +311,18 @@ def run_protocol(args: argparse.Namespace) -> dict:
     out_dir.mkdir(parents=True, exist_ok=True)
     method = args.method
     runs = []
-    with seeds_progress(states, f"protocol {road} {method}") as bar:
+    # With the test held, a seed validated before is as finished as a done one; without, its test is left.
+    finished = ("done", "validated") if args.hold_test else ("done",)
+    with seeds_progress(states, f"protocol {road} {method}", finished) as bar:
         for seed, cfg in configs.items():
             record = out_dir / f"{method}-s{seed}.json"
             state = states[seed]
-            if state == "done":
-                write(f"protocol: {method} seed {seed}: done ({record}), skipped")
+            if state in finished:
+                write(f"protocol: {method} seed {seed}: {state} ({record}), skipped")
                 runs.append(add_final_validation(record, cfg, args))
+            elif state == "validated":
+                write(f"protocol: {method} seed {seed}: validated before, its test held; driving its test episodes")
+                runs.append(test_validated_seed(record, cfg, args, out_dir))
             else:
                 if state == "resume":
                     write(f"protocol: {method} seed {seed}: continuing the unfinished run in {cfg.train.run_dir}")
@@ -291,11 +339,15 @@ def run_protocol(args: argparse.Namespace) -> dict:
     # test episodes share (`experiment paper`'s modes), so the drivers drive them once.
     baselines_dir = Path(getattr(args, "baselines_dir", None) or out_dir)
     baselines_dir.mkdir(parents=True, exist_ok=True)
-    results = summarise(args, road, runs, *drivers_on(env_cfg, args.test_episodes, baselines_dir))
     if args.final_validation_episodes:  # the drivers on the same validation episodes
-        drivers = drivers_on(env_cfg, args.final_validation_episodes, baselines_dir, VALIDATION_SEED,
-                             "baselines-validation")
-        results["final_validation"] = final_validation_results(args, runs, *drivers, VALIDATION_SEED)
+        validation_drivers = drivers_on(env_cfg, args.final_validation_episodes, baselines_dir, VALIDATION_SEED,
+                                        "baselines-validation")
+    if args.hold_test:  # the validation rates where the test's would be; no test episode driven
+        results = held_test_summary(args, road, runs, *validation_drivers)
+    else:
+        results = summarise(args, road, runs, *drivers_on(env_cfg, args.test_episodes, baselines_dir))
+        if args.final_validation_episodes:
+            results["final_validation"] = final_validation_results(args, runs, *validation_drivers, VALIDATION_SEED)
     results["command"] = command_line()
     write_json(out_dir / "results.json", results)
     table = render_table(results)
@@ -327,6 +379,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help=f"also evaluate each final network and the drivers on N validation episodes per initial "
                         f"lane (episode seeds from {VALIDATION_SEED:,}): the numbers to choose between recipes on "
                         f"(0 = off; again on a finished study: adds them)")
+    p.add_argument("--hold-test", action="store_true",
+                   help="a probe: train and evaluate the final networks on the validation episodes only (needs "
+                        "--final-validation-episodes); the test episodes are not driven until the same command "
+                        "runs without --hold-test")
     p.add_argument("--stability-target", type=fraction, default=0.93,
                    help="validation achievement after whose first crossing the largest drop is measured")
     p.add_argument("--out", metavar="DIR", help="where the runs, results.json, table.md and the figure go "

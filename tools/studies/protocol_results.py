@@ -3,7 +3,7 @@ in ``baselines.json``; allroads: per road, ``road_baselines``), ``results.json``
 ``experiment compare``'s layout) and ``table.md`` (``render_table``: the test rates beside the
 drivers', then the validation table); with ``--final-validation-episodes``, the final networks and
 the drivers on validation episodes too (``final_validation``), the numbers a choice between recipes
-rests on.
+rests on; with ``--hold-test``, those alone (``held_test_summary``).
 
 Room: the tools (studies). May import: anything in laneshift.
 """
@@ -19,8 +19,8 @@ from laneshift.config import EnvConfig
 from laneshift.progress import write
 from laneshift.tools.studies import allroads
 from laneshift.tools.studies.evaluate import INITIAL_LANES, evaluate_lanes
-from laneshift.tools.studies.protocol_validation import (THRESHOLDS, drop_noise, stability_drop, time_to_threshold,
-                                                        validation_table)
+from laneshift.tools.studies.protocol_validation import (THRESHOLDS, VALIDATION_SEED, drop_noise, stability_drop,
+                                                        time_to_threshold, validation_table)
 from laneshift.tools.studies.provenance import write_json
 from laneshift.tools.studies.table2 import (HUMAN_LIKE_ROW, across_seeds, driven_rates, driver_cells,
                                             human_like_lanes, lane_stats, learned_cells, protocol_intro,
@@ -91,10 +91,12 @@ def drivers_on(env_cfg: EnvConfig, episodes: int, out_dir: Path, episode_seed: i
 
 
 def summarise(args: argparse.Namespace, road: str, runs: list[dict], drivers: dict[str, dict],
-              drivers_by_road: dict[str, dict] | None = None) -> dict:
+              drivers_by_road: dict[str, dict] | None = None, episode_seed: int = TEST_SEED,
+              episodes: int | None = None) -> dict:
     """results.json: the protocol's numbers, in ``experiment compare``'s layout (``methods``,
     ``baselines``) plus the per-seed validation measures and the comparison with the scripted driver;
-    allroads (``drivers_by_road``): the four roads pooled there, and per road in ``roads``."""
+    allroads (``drivers_by_road``): the four roads pooled there, and per road in ``roads``. The rates
+    are of the test episodes unless ``episode_seed`` and ``episodes`` name others."""
     method = args.method
     per_seed = {}
     for run in runs:
@@ -108,9 +110,21 @@ def summarise(args: argparse.Namespace, road: str, runs: list[dict], drivers: di
     return {"kind": "protocol", "road": road, "scenario": args.scenario, "method": method,
             "env_steps": args.env_steps, "seeds": [r["seed"] for r in runs],
             "eval_episodes": args.test_episodes, "eval_max_steps": args.eval_max_steps,
-            **rates_summary(args, runs, drivers, drivers_by_road, TEST_SEED),
+            **rates_summary(args, runs, drivers, drivers_by_road, episode_seed, episodes),
             "validation": {k: validation.get(k) for k in ("episode_seed", "every", "episodes")},
             "stability_target": args.stability_target, "thresholds": list(THRESHOLDS), "per_seed": per_seed}
+
+
+def held_test_summary(args: argparse.Namespace, road: str, runs: list[dict], drivers: dict[str, dict],
+                      drivers_by_road: dict[str, dict] | None) -> dict:
+    """results.json of a study whose test is held (``--hold-test``): :func:`summarise`'s layout with
+    the final networks' and the drivers' rates on the validation episodes in it, ``test`` naming those
+    episodes and ``test_held`` saying so. A seed tested before is shown by its validation rates too."""
+    kept = ("eval", "eval_by_road")
+    views = [{**{k: v for k, v in run.items() if k not in kept},
+              **{k: v for k, v in run["final_validation"].items() if k in kept}} for run in runs]
+    episodes = runs[0]["final_validation"]["episodes_per_lane"]
+    return {**summarise(args, road, views, drivers, drivers_by_road, VALIDATION_SEED, episodes), "test_held": True}
 
 
 def rates_summary(args: argparse.Namespace, runs: list[dict], drivers: dict[str, dict],
@@ -137,11 +151,25 @@ def render_table(results: dict) -> str:
     """table.md: the test rates per initial lane beside the baselines' (allroads: per road and initial
     lane), then the final networks' validation rates where measured, then per seed the time to the
     validation thresholds and the stability figure."""
+    intro = held_test_intro(results) if results.get("test_held") else None
     if "roads" in results:
-        lines = allroads.render_road_table(results, (SCRIPTED_ROW, HUMAN_LIKE_ROW))
+        lines = allroads.render_road_table(results, (SCRIPTED_ROW, HUMAN_LIKE_ROW), intro=intro)
     else:
-        lines = rates_table(results)
+        lines = rates_table(results, intro=intro)
     return "\n".join(lines + final_validation_table(results) + validation_table(results)) + "\n"
+
+
+def held_test_intro(results: dict) -> str:
+    """The sentence above a held-test study's table: its rates are the validation episodes', and the
+    test episodes have not been driven."""
+    val = results["test"]
+    first, count = val["episode_seed"], val["episodes_per_lane"]
+    where = "on each road its own " if "roads" in results else ""
+    return (f"**{results['road']}, {results['method']}**: {results['env_steps']:,} env steps per run, seeds "
+            f"{results['seeds']}, the final network of each run (no checkpoint selection), on the **validation "
+            f"episodes** ({where}{count} per initial lane, episode seeds {first:,}-{first + count - 1:,}, "
+            f"{val['max_steps']} steps each; the drivers drive them too). **Test held**: the test episodes have not "
+            f"been driven; the same command without --hold-test drives them once the choice is made.")
 
 
 def rates_table(results: dict, intro: str | None = None) -> list[str]:
