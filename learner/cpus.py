@@ -9,7 +9,8 @@ in phase 1 the workers' CPU sat idle (``top``: 47 % idle for the 5 minutes of an
 256 x 256 units and 1.41x with 512 x 512 (`tools/bench/scripts/phase1_threads.py`,
 docs/performance-log.md). Why only phase 1: in phase 2 the workers, the replay server and the
 router use the other CPUs, and a second learner thread there made runs slower
-(``learner/process.py``).
+(``learner/process.py``). Where another process keeps those CPUs busy in phase 1, one thread per CPU
+is several times slower than one: ``ThreadChooser`` times both as phase 1 goes and keeps the faster.
 
 Room: learner (component). May import: the standard library, torch and the contract
 (``laneshift.cpus`` moves the threads).
@@ -52,6 +53,72 @@ def phase1_cpus(threads: int, device: torch.device) -> Iterator[str | None]:
     finally:
         torch.set_num_threads(threads_before)
         set_thread_masks(mask_before, masks=masks)
+
+
+class ThreadChooser:
+    """Phase 1's torch threads chosen by the updates a second each count makes here and now
+    (``learner.phase1_threads=0``): one per CPU, or one.
+
+    Why measured, not fixed: one thread per CPU makes phase 1 1.13x faster on a quiet machine
+    (256 x 256 units, the module doc), but when another process keeps a CPU busy, a thread of
+    torch's loses its turn on it and the other waits for it at each of the small ops' joins:
+    phase 1 then ran at 8-10 updates a second where one thread makes about 80 (this machine, a
+    test suite beside a run, 2026-11-29). So each count is timed over ``window_s`` in turn, the
+    faster one kept for ``every_s``, and timed again then, since the other process may end or start.
+    At most ``window_s`` in ``every_s + 2 * window_s`` goes to the slower count.
+
+    ``tick(updates, now)`` after each batch of updates: the thread count to set now, or None.
+    """
+
+    def __init__(self, counts: tuple[int, ...], window_s: float = 3.0, every_s: float = 30.0) -> None:
+        if len(set(counts)) < 2 or min(counts) < 1:
+            raise ValueError(f"ThreadChooser: at least two different counts >= 1, got {counts}")
+        if window_s <= 0 or every_s < 0:
+            raise ValueError(f"ThreadChooser: window_s > 0 and every_s >= 0, got {window_s}, {every_s}")
+        self.window_s, self.every_s = window_s, every_s
+        self.current = counts[0]  # the count set when phase 1 starts (phase1_cpus')
+        self.rates: dict[int, float] = {}  # updates a second of each count, the last time it was timed
+        self._trials = list(counts)  # the counts still to time in this round, the one running first
+        self._start: tuple[float, int] | None = None  # (time, updates) where the running window began
+        self._until = 0.0  # the chosen count runs untimed until then
+        self.chosen: int | None = None  # the faster count of the last round of timings
+
+    def tick(self, updates: int, now: float) -> int | None:
+        if not self._trials:  # the chosen count's untimed stretch
+            if now < self._until:
+                return None
+            # The other counts first, the chosen one last: it is running now, so its window starts at once.
+            self._trials = [c for c in self.rates if c != self.current] + [self.current]
+            return self._begin(updates, now)
+        if self._start is None:
+            self._start = (now, updates)
+            return None
+        began, done = self._start
+        if now - began < self.window_s:
+            return None
+        self.rates[self._trials.pop(0)] = (updates - done) / (now - began)
+        if self._trials:
+            return self._begin(updates, now)
+        self._until = now + self.every_s
+        self.chosen = max(self.rates, key=lambda c: (self.rates[c], c))
+        return self._switch(self.chosen)
+
+    def _begin(self, updates: int, now: float) -> int | None:
+        # A window starts at the first tick on its count: the updates already in flight at a switch
+        # (a batch, the prefetched requests' decode) are the previous count's.
+        self._start = (now, updates) if self._trials[0] == self.current else None
+        return self._switch(self._trials[0])
+
+    def _switch(self, count: int) -> int | None:
+        if count == self.current:
+            return None
+        self.current = count
+        return count
+
+    def summary(self) -> str:
+        """The last timings, for the log: ``2 threads 150.2/s, 1 thread 133.0/s``."""
+        return ", ".join(f"{c} thread{'s' if c > 1 else ''} {r:.1f}/s" for c, r in sorted(self.rates.items(),
+                                                                                        reverse=True))
 
 
 def bf16_warning(cfg: LearnerConfig, device: torch.device) -> str | None:

@@ -45,7 +45,7 @@ from laneshift.envspec import RECORDED_ENV_OPTIONS, EnvSpec
 from laneshift.qnet import weights_of
 
 from .batches import MAX_REPLY_BYTES, batches_per_request, retry_delay, sample_or_wait, split_updates
-from .cpus import bf16_warning, phase1_cpus
+from .cpus import ThreadChooser, bf16_warning, phase1_cpus
 from .dqn import METRIC_NAMES, DoubleDQN
 from .episodes import EpisodeStats
 from .metrics import MetricsLog
@@ -296,6 +296,10 @@ class Learner:
         with phase1_cpus(self.lcfg.phase1_threads, self.agent.device) as widened:
             if widened:
                 print(f"learner: {widened}", flush=True)
+            # learner.phase1_threads=0: one thread per CPU or one, whichever is faster now (cpus.py).
+            chooser = ThreadChooser((torch.get_num_threads(), 1)) if widened and not self.lcfg.phase1_threads \
+                else None
+            said = None
             # Whole requests with the next one in flight (prefetch.py), as in phase 2: the round trip
             # and the decode overlap the updates (1.13-1.18x the updates/s; docs/performance-log.md).
             # The imitation losses alone read no next observations: the replies leave them out.
@@ -307,6 +311,8 @@ class Learner:
                     batch = ahead.take(timeout=0.5)
                     if batch is not None:
                         self._updates(batch)
+                        if chooser is not None:
+                            said = self._follow_thread_chooser(chooser, said)
                     next_log = self._log_when_due(next_log)
             finally:
                 self.unused_sample_rows += ahead.close()  # demo rows sampled ahead, counted at the run's end
@@ -319,6 +325,18 @@ class Learner:
                 if batch is not None:
                     self._updates(batch)
                 next_log = self._log_when_due(next_log)
+
+    def _follow_thread_chooser(self, chooser: ThreadChooser, said: int | None) -> int | None:
+        """Set the torch threads ``chooser`` asks for; one log line when a round of its timings picks
+        another count than the last one said. Returns the count said last."""
+        count = chooser.tick(self.agent.updates, time.monotonic())
+        if count is not None:
+            torch.set_num_threads(count)
+        if chooser.chosen is not None and chooser.chosen != said:
+            print(f"learner: phase 1 on {chooser.chosen} torch thread{'s' if chooser.chosen > 1 else ''} "
+                  f"({chooser.summary()}; timed again every {chooser.every_s:g} s)", flush=True)
+            return chooser.chosen
+        return said
 
     def _set_replay_phase(self, phase: int) -> bool:
         while not self.links.set_phase(phase):

@@ -1,6 +1,7 @@
 """``learner.cpus.phase1_cpus``: phase 1 lifts the learner's pin and widens torch's threads, then puts
 back every thread's own mask and the thread count; a GPU learner and ``learner.phase1_threads=1``
-change nothing. Real affinity calls on this process, restored by each test.
+change nothing. Real affinity calls on this process, restored by each test. ``ThreadChooser`` (phase
+1's thread count timed as it goes) on a made-up clock: the faster count kept, timed again each round.
 
 Room: tests, unit. May import: laneshift (any floor), pytest, torch and the standard library."""
 
@@ -85,3 +86,59 @@ def test_nothing_changes_for_one_thread_or_a_gpu(pinned_to_one_cpu, threads, dev
 def test_config_refuses_a_bad_thread_count(bad):
     with pytest.raises(ConfigError, match="learner.phase1_threads"):
         LearnerConfig(phase1_threads=bad)
+
+
+def _drive(chooser, speed, until: float, step: float = 0.1, start: tuple[float, int] = (0.0, 0)) -> list:
+    """Ticks every ``step`` s, the updates growing at ``speed(count, now)`` a second; the switches asked for."""
+    now, updates, asked = start[0], start[1], []
+    while now < until:
+        now += step
+        updates += round(speed(chooser.current, now) * step)
+        count = chooser.tick(updates, now)
+        if count is not None:
+            asked.append((round(now, 1), count))
+    return asked
+
+
+def test_the_chooser_keeps_every_cpu_on_a_quiet_machine_and_one_thread_beside_a_busy_process():
+    from laneshift.learner.cpus import ThreadChooser
+
+    chooser = ThreadChooser((2, 1), window_s=3.0, every_s=30.0)
+    quiet = {2: 150.0, 1: 130.0}
+    asked = _drive(chooser, lambda c, now: quiet[c], until=7.0)
+    # Two timed first (its window from the first tick), then one, then two kept.
+    assert [c for _, c in asked] == [1, 2] and chooser.chosen == 2
+    assert chooser.rates == pytest.approx({2: 150.0, 1: 130.0}, rel=0.05)
+    assert chooser.summary().startswith("2 threads 15") and "1 thread 13" in chooser.summary()
+    # Another process starts on the CPUs: at the next round one thread wins and is kept.
+    busy = {2: 9.0, 1: 80.0}
+    asked = _drive(chooser, lambda c, now: busy[c], until=45.0, start=(7.0, 1000))
+    assert asked[-1][1] == 1 and chooser.chosen == 1 and chooser.current == 1
+    assert 36.0 < asked[-1][0] < 45.0  # after 30 s untimed and the two windows
+    # It ends: two threads again after the following round.
+    _drive(chooser, lambda c, now: quiet[c], until=90.0, start=(45.0, 5000))
+    assert chooser.chosen == 2 and chooser.current == 2
+
+
+def test_the_slower_count_costs_at_most_one_window_a_round():
+    from laneshift.learner.cpus import ThreadChooser
+
+    chooser = ThreadChooser((2, 1), window_s=3.0, every_s=30.0)
+    speed = {2: 10.0, 1: 100.0}
+    time_on = {1: 0.0, 2: 0.0}
+
+    def rate(count, now):
+        time_on[count] += 0.1
+        return speed[count]
+
+    _drive(chooser, rate, until=600.0)
+    assert time_on[2] / 600.0 < 3.0 / 33.0 + 0.02  # one window of 3 s a round of 36 s (the first round too)
+
+
+@pytest.mark.parametrize("counts, window, every", [((2,), 3.0, 30.0), ((2, 2), 3.0, 30.0), ((2, 0), 3.0, 30.0),
+                                                   ((2, 1), 0.0, 30.0), ((2, 1), 3.0, -1.0)])
+def test_the_chooser_refuses_what_it_cannot_time(counts, window, every):
+    from laneshift.learner.cpus import ThreadChooser
+
+    with pytest.raises(ValueError, match="ThreadChooser"):
+        ThreadChooser(counts, window_s=window, every_s=every)

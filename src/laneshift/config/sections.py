@@ -427,8 +427,9 @@ class LearnerConfig:
     prefetch: int = 4
     torch_threads: int = 1  # torch threads for the learner's updates
     # Phase 1 (dqfd and rehearsal pre-training on the demo shard) runs while every actor waits: the
-    # CPU learner then lifts its pin (deploy.learner_core) and uses this many torch threads, 0 = one
-    # per CPU it may use; 1 = as in phase 2 (learner/cpus.py).
+    # CPU learner then lifts its pin (deploy.learner_core) and uses this many torch threads; 0 = one
+    # per CPU it may use or one, whichever it times faster (again every 30 s: a process busy beside
+    # it makes one per CPU several times slower); 1 = as in phase 2 (learner/cpus.py).
     phase1_threads: int = 0
     # The learner's Prometheus /metrics: -1 off, 0 a free port (local runs turn it on), else that port.
     metrics_port: int = -1

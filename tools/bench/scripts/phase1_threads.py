@@ -6,9 +6,14 @@ updates between the first and the last phase-1 record over the time between them
     python tools/bench/scripts/phase1_threads.py --rounds 2 --hidden 256,256 512,512
     python tools/bench/scripts/phase1_threads.py --threads 0 --laneshift OTHER_CHECKOUT/.venv/bin/laneshift
     python tools/bench/scripts/phase1_threads.py --hidden 512,512 --set learner.mlp_precision=bf16
+    python tools/bench/scripts/phase1_threads.py --threads 1,2,0 --busy 1 --updates 2000 --hidden 256,256
 
-Needs a quiet machine (a training run beside it measures the other run). The demo shard is made
-by the first (untimed) run and reused.
+``--busy N``: N processes that keep a CPU busy each (a bare Python loop) beside every timed run, as a
+test suite or another job beside a training run does; phase1_threads 0 times one thread per CPU
+against one as it goes (``learner.cpus.ThreadChooser``), 2 is two threads whatever happens.
+
+Needs a quiet machine otherwise (a training run beside it measures the other run). The demo shard
+is made by the first (untimed) run and reused.
 
 Room: the tools (benchmark scripts). May import: the standard library; runs ``laneshift`` as a
 command.
@@ -42,7 +47,13 @@ def train(run_dir: Path, args: argparse.Namespace, hidden: str, threads: int, up
            "--set", f"learner.phase1_threads={threads}", "--set", "train.eval_episodes=0"]
     for extra in args.set:
         cmd += ["--set", extra]
-    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(0 if updates else args.busy)]
+    try:
+        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    finally:
+        for proc in busy:  # ours, by PID
+            proc.kill()
+            proc.wait()
     return 0.0 if updates else phase1_rate(run_dir / "metrics.jsonl")
 
 
@@ -55,6 +66,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--scenario", default="merge")
     p.add_argument("--method", default="dqfd-bc-alongside-gaps-safe-shield")
     p.add_argument("--threads", default="1,0", help="learner.phase1_threads values, alternated (default 1,0)")
+    p.add_argument("--busy", type=int, default=0, metavar="N",
+                   help="N busy processes (one CPU each) beside every timed run (default 0: a quiet machine)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="a config value for every run (repeatable), e.g. learner.mlp_precision=bf16")
     p.add_argument("--laneshift", default=str(Path(sys.executable).with_name("laneshift")),
@@ -75,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
         line = ", ".join(f"phase1_threads {t}: {m:.1f} updates/s" for t, m in means.items())
         if 1 in means and 0 in means:
             line += f" (every CPU against pinned: {means[0] / means[1]:.2f}x)"
-        print(f"hidden {hidden}: {line}")
+        print(f"hidden {hidden}{f', {args.busy} busy process(es) beside' if args.busy else ''}: {line}")
     return 0
 
 
