@@ -62,8 +62,9 @@ class ThreadChooser:
     Why measured, not fixed: one thread per CPU makes phase 1 1.13x faster on a quiet machine
     (256 x 256 units, the module doc), but when another process keeps a CPU busy, a thread of
     torch's loses its turn on it and the other waits for it at each of the small ops' joins:
-    phase 1 then ran at 8-10 updates a second where one thread makes about 80 (this machine, a
-    test suite beside a run, 2026-11-29). So each count is timed over ``window_s`` in turn, the
+    beside one busy process, phase 1 of a merge run made 3.8 updates a second on two threads and
+    59.1 on one (`tools/bench/scripts/phase1_threads.py --busy 1`, docs/performance-log.md,
+    2026-11-29). So each count is timed over ``window_s`` in turn, the
     faster one kept for ``every_s``, and timed again then, since the other process may end or start.
     At most ``window_s`` in ``every_s + 2 * window_s`` goes to the slower count.
 

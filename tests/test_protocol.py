@@ -243,6 +243,28 @@ def test_a_held_test_drives_validation_episodes_only_until_the_same_command_with
     assert "**Test held**" not in (out / "table.md").read_text()
 
 
+def test_the_seed_bar_starts_at_the_share_a_stopped_run_made_before(tmp_path):
+    """A resumed seed's remaining piece counts as what is left of it, not as a whole seed done fast."""
+    from laneshift.config import load_run_config
+    from laneshift.tools.studies.protocol import seeds_progress, started_shares
+
+    configs, states = {}, {0: "done", 1: "resume", 2: "new", 3: "resume"}
+    for seed in states:
+        run_dir = tmp_path / f"s{seed}"
+        run_dir.mkdir()
+        configs[seed] = load_run_config(overrides={"train.run_dir": str(run_dir), "train.env_steps": 1200})
+    records = [{"kind": "learner", "env_steps": 0, "phase": 1}, {"kind": "eval", "env_steps": 900},
+               {"kind": "learner", "env_steps": 300, "phase": 2}]
+    (tmp_path / "s1" / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
+    (tmp_path / "s2" / "metrics.jsonl").write_text(json.dumps(records[-1]) + "\n")  # new: not counted
+    started = started_shares(configs, states)  # seed 3 stopped before its first record
+    assert started == {1: 0.25}
+    with seeds_progress(states, "protocol", started=started) as bar:
+        assert bar.n == pytest.approx(1.25)  # seed 0 done, a quarter of seed 1
+        bar.update(1 - started[1])
+        assert bar.n == pytest.approx(2.0)
+
+
 def test_bad_input_fails_before_any_run(tmp_path, capsys):
     from laneshift.tools import cli
 

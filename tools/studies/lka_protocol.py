@@ -39,7 +39,7 @@ from laneshift.progress import write
 from laneshift.tools.argtypes import add_set_arg, parse_set, positive_int
 from laneshift.tools.studies.evaluate import evaluate_policy, load_greedy_policy, lka_response, plot_lka_response
 from laneshift.tools.studies.protocol import (check_same_protocol, checked_seeds, seed_state, seeds_progress,
-                                             train_seed)
+                                             started_shares, train_seed)
 from laneshift.tools.studies.protocol_publish import publish_final
 from laneshift.tools.studies.protocol_results import TEST_SEED
 from laneshift.tools.studies.provenance import command_line, git_revision, write_json
@@ -183,7 +183,8 @@ def run_lka(args: argparse.Namespace) -> dict:
     out_dir, configs, states = plan(args)
     out_dir.mkdir(parents=True, exist_ok=True)
     runs = []
-    with seeds_progress(states, f"lka protocol {args.method}") as bar:
+    started = started_shares(configs, states)
+    with seeds_progress(states, f"lka protocol {args.method}", started=started) as bar:
         for seed, cfg in configs.items():
             record = out_dir / f"{args.method}-s{seed}.json"
             if states[seed] == "done":
@@ -191,7 +192,7 @@ def run_lka(args: argparse.Namespace) -> dict:
                 runs.append(json.loads(record.read_text()))
             else:
                 runs.append(run_seed(cfg, states[seed], args, out_dir))
-                bar.update()
+                bar.update(1 - started.get(seed, 0.0))
     expert = expert_row(next(iter(configs.values())).env, args.test_episodes, out_dir)
     results = summarise(args, runs, expert)
     write_json(out_dir / "results.json", results)

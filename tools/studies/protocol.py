@@ -68,7 +68,7 @@ from laneshift.tools.studies.protocol_results import (TEST_SEED, drivers_on, fin
                                                       held_test_summary, render_table, summarise)
 from laneshift.tools.studies.protocol_validation import VALIDATION_SEED, plot_validation, validation_curve
 from laneshift.tools.studies.provenance import command_line, git_revision, write_json
-from laneshift.tools.studies.runs import method_config, train_logged
+from laneshift.tools.studies.runs import method_config, metrics_records, train_logged
 
 SCENARIOS = ("straight", "merge", "curve", "roundabout")
 #: ``--scenario``'s choices: a road, or one network for all four.
@@ -227,10 +227,11 @@ def run_seed(cfg: RunConfig, state: str, args: argparse.Namespace, out_dir: Path
         write_json(out_dir / f"{method}-s{seed}.json", record)
         say_rates(f"{method} seed {seed} (validation episodes; test held)", final_validation)
         return record
-    return test_seed(record, greedy, test_env, args, out_dir)
+    return with_test_rates(record, greedy, test_env, args, out_dir)
 
 
-def test_seed(record: dict, greedy: Policy, test_env: EnvConfig, args: argparse.Namespace, out_dir: Path) -> dict:
+def with_test_rates(record: dict, greedy: Policy, test_env: EnvConfig, args: argparse.Namespace,
+                    out_dir: Path) -> dict:
     """A seed's record with its final network's rates on the test episodes (``eval``; allroads
     ``eval_by_road`` too) and ``test_held`` gone, written as ``<method>-s<seed>.json`` and returned."""
     seed, method = record["seed"], record["method"]
@@ -244,11 +245,12 @@ def test_seed(record: dict, greedy: Policy, test_env: EnvConfig, args: argparse.
     return record
 
 
-def test_validated_seed(record_path: Path, cfg: RunConfig, args: argparse.Namespace, out_dir: Path) -> dict:
+def drive_held_test(record_path: Path, cfg: RunConfig, args: argparse.Namespace, out_dir: Path) -> dict:
     """A seed validated before with its test held: its final network on the test episodes now."""
     record = add_final_validation(record_path, cfg, args)
     greedy = load_greedy_policy(run_checkpoint(cfg.train.run_dir))
-    return test_seed(record, greedy, dataclasses.replace(cfg.env, max_steps=args.eval_max_steps), args, out_dir)
+    test_env = dataclasses.replace(cfg.env, max_steps=args.eval_max_steps)
+    return with_test_rates(record, greedy, test_env, args, out_dir)
 
 
 def say_rates(what: str, evaluated: dict) -> None:
@@ -297,13 +299,30 @@ def add_final_validation(record_path: Path, cfg: RunConfig, args: argparse.Names
     return record
 
 
-def seeds_progress(states: dict[int, str], desc: str, finished: tuple[str, ...] = ("done",)) -> tqdm:
+def seeds_progress(states: dict[int, str], desc: str, finished: tuple[str, ...] = ("done",),
+                   started: dict[int, float] | None = None) -> tqdm:
     """A study's bar over its seeds. The seeds finished before this command (``finished``: their
-    states) are its start (tqdm's ``initial``), not seeds done now in no time: call ``update()`` only
-    for the others, so the rate and the time left count only the seeds this command trains or
-    evaluates."""
-    return progress(total=len(states), initial=sum(state in finished for state in states.values()), desc=desc,
-                    unit="seed")
+    states) are its start (tqdm's ``initial``), not seeds done now in no time, and so is the share
+    of its budget a stopped run made before (``started``, by seed: :func:`started_shares`): call
+    ``update(1 - started.get(seed, 0))`` only for the others, so the rate and the time left count
+    only what this command trains or evaluates."""
+    initial = sum(state in finished for state in states.values()) + sum((started or {}).values())
+    return progress(total=len(states), initial=initial, desc=desc, unit="seed")
+
+
+def started_shares(configs: dict[int, RunConfig], states: dict[int, str]) -> dict[int, float]:
+    """Each stopped run's (state ``resume``) share of its env-step budget made before it stopped:
+    the env steps of its last learner record in metrics.jsonl (0 where it had none, as in
+    pre-training)."""
+    shares = {}
+    for seed, cfg in configs.items():
+        path = Path(cfg.train.run_dir) / "metrics.jsonl"
+        if states[seed] != "resume" or not path.is_file():
+            continue
+        steps = [rec["env_steps"] for rec in metrics_records(path)
+                 if rec.get("kind") == "learner" and isinstance(rec.get("env_steps"), int)]
+        shares[seed] = min(max(steps[-1] if steps else 0, 0) / cfg.train.env_steps, 1.0)
+    return shares
 
 
 def run_protocol(args: argparse.Namespace) -> dict:
@@ -313,7 +332,8 @@ def run_protocol(args: argparse.Namespace) -> dict:
     runs = []
     # With the test held, a seed validated before is as finished as a done one; without, its test is left.
     finished = ("done", "validated") if args.hold_test else ("done",)
-    with seeds_progress(states, f"protocol {road} {method}", finished) as bar:
+    started = started_shares(configs, states)
+    with seeds_progress(states, f"protocol {road} {method}", finished, started) as bar:
         for seed, cfg in configs.items():
             record = out_dir / f"{method}-s{seed}.json"
             state = states[seed]
@@ -322,7 +342,7 @@ def run_protocol(args: argparse.Namespace) -> dict:
                 runs.append(add_final_validation(record, cfg, args))
             elif state == "validated":
                 write(f"protocol: {method} seed {seed}: validated before, its test held; driving its test episodes")
-                runs.append(test_validated_seed(record, cfg, args, out_dir))
+                runs.append(drive_held_test(record, cfg, args, out_dir))
             else:
                 if state == "resume":
                     write(f"protocol: {method} seed {seed}: continuing the unfinished run in {cfg.train.run_dir}")
@@ -332,8 +352,8 @@ def run_protocol(args: argparse.Namespace) -> dict:
                 runs.append(run_seed(cfg, state, args, out_dir, road))
             if args.publish:  # each seed as it is done: a later seed's run may be stopped before the study's end
                 publish_run(runs[-1], Path(args.publish), road, method)
-            if state != "done":
-                bar.update()
+            if state not in finished:
+                bar.update(1 - started.get(seed, 0.0))
     env_cfg = dataclasses.replace(next(iter(configs.values())).env, max_steps=args.eval_max_steps)
     # Where the drivers' rows are kept: this study's dir, or one that several studies of the same
     # test episodes share (`experiment paper`'s modes), so the drivers drive them once.
