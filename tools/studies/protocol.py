@@ -218,12 +218,13 @@ def run_seed(cfg: RunConfig, state: str, args: argparse.Namespace, out_dir: Path
     record = {"seed": seed, "method": method, "road": road, "run_dir": str(run_dir),
               "resumed": state == "resume", "wall_s": round(time.monotonic() - started, 1),
               "train_wall_s": summary.get("wall_s"), "env_steps": summary.get("env_steps") or cfg.train.env_steps,
-              "test": held_out(args, cfg.env), "test_held": True,
+              "test": held_out(args, cfg.env),
               "validation": {"episode_seed": t.get("validation_seed"), "every": t["eval_every"],
                              "episodes": t["periodic_eval_episodes"], "curve": validation_curve(run_dir)},
               **({"final_validation": final_validation} if final_validation else {}),
               "command": command_line(), "git": git_revision(), "config": config}
     if args.hold_test:
+        record["test_held"] = True
         write_json(out_dir / f"{method}-s{seed}.json", record)
         say_rates(f"{method} seed {seed} (validation episodes; test held)", final_validation)
         return record
@@ -233,13 +234,11 @@ def run_seed(cfg: RunConfig, state: str, args: argparse.Namespace, out_dir: Path
 def with_test_rates(record: dict, greedy: Policy, test_env: EnvConfig, args: argparse.Namespace,
                     out_dir: Path) -> dict:
     """A seed's record with its final network's rates on the test episodes (``eval``; allroads
-    ``eval_by_road`` too) and ``test_held`` gone, written as ``<method>-s<seed>.json`` and returned."""
+    ``eval_by_road`` too), ``test_held`` gone and ``command`` the one that drove them, written as
+    ``<method>-s<seed>.json`` and returned."""
     seed, method = record["seed"], record["method"]
     tested = evaluate_final(greedy, test_env, args.test_episodes, TEST_SEED, f"test {method} seed {seed}")
-    record = {k: v for k, v in record.items() if k != "test_held"}
-    at = list(record).index("test") + 1  # the rates beside the episodes they are of
-    record = {**dict(list(record.items())[:at]), **tested, **dict(list(record.items())[at:])}
-    record["command"] = command_line()  # the command that drove the test episodes
+    record = {**{k: v for k, v in record.items() if k != "test_held"}, **tested, "command": command_line()}
     write_json(out_dir / f"{method}-s{seed}.json", record)
     say_rates(f"{method} seed {seed}", tested)
     return record
@@ -321,7 +320,7 @@ def started_shares(configs: dict[int, RunConfig], states: dict[int, str]) -> dic
             continue
         steps = [rec["env_steps"] for rec in metrics_records(path)
                  if rec.get("kind") == "learner" and isinstance(rec.get("env_steps"), int)]
-        shares[seed] = min(max(steps[-1] if steps else 0, 0) / cfg.train.env_steps, 1.0)
+        shares[seed] = min((steps[-1] if steps else 0) / cfg.train.env_steps, 1.0)
     return shares
 
 
