@@ -35,7 +35,7 @@ from laneshift.config import ActorConfig, EnvConfig
 from laneshift.nstep import NStepAccumulator, NStepItem, check_nstep
 
 from .envs import make as make_env
-from .exploration import make_schedule
+from .exploration import HeldExploration, make_schedule
 from .policy import QPolicy
 from .seams import ActorLinks, Delivery, WeightsUpdate
 
@@ -159,6 +159,8 @@ class EnvWorker:
             cfg = dataclasses.replace(cfg, epsilon_start=cfg.phase2_epsilon_start)
         epsilon = make_schedule(cfg, self.index, budget=env_steps)
         n_envs = len(self.envs)
+        held = (HeldExploration(n_envs, self.policy.n_actions, cfg.hold_mu, cfg.hold_max, self.policy.rng)
+                if cfg.hold_mu > 0 else None)
         # A resumed worker reseeds differently: replaying the first run's episodes would bias the data.
         seed = self.cfg.seed + 1000 * self.index + 7_777_777 * resume.restarts
         obs = np.stack([env.reset(seed=seed + j)[0] for j, env in enumerate(self.envs)])
@@ -181,7 +183,10 @@ class EnvWorker:
                     stopping = True  # the batch being filled ends here: what it holds is sent below
                     break
                 eps = epsilon(steps)
-                actions = self.policy.act(obs, eps)
+                if held is None:
+                    actions = self.policy.act(obs, eps)
+                else:
+                    actions = held.act(self.policy.greedy(obs), eps)
                 # The budget's last step may need fewer than all envs: never overrun it.
                 for j, env in enumerate(self.envs[:env_steps - steps]):
                     next_obs, reward, terminated, truncated, info = env.step(int(actions[j]))
@@ -196,6 +201,8 @@ class EnvWorker:
                             bool(info.get("on_target_lane", False)), self.policy.version, self.policy.phase,
                             env_steps=steps + j + 1, epsilon=float(eps)))
                         ep_return[j], ep_len[j] = 0.0, 0
+                        if held is not None:
+                            held.end_episode(j)
                         next_obs, _ = env.reset()
                     obs[j] = next_obs
                 steps += min(n_envs, env_steps - steps)

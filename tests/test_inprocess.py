@@ -36,6 +36,14 @@ def test_async_inprocess_respects_the_sample_to_insert_ratio(tmp_path):
     assert result["version"] == result["updates"] // 5
 
 
+def test_a_run_with_held_exploration_stores_every_env_step(tmp_path):
+    """ez-greedy (actor.hold_mu) in a real worker: the run spends its budget and stores each step once."""
+    cfg = load_run_config(overrides={**FAST, "train.env_steps": 1000, "actor.hold_mu": 2.0, "actor.hold_max": 20,
+                                     "train.run_dir": str(tmp_path)})
+    result = train_inprocess(cfg)
+    assert result["replay"]["tables"]["online"]["inserted"] == 1000
+
+
 def test_sync_inprocess_rounds(tmp_path):
     cfg = load_run_config(overrides={**FAST, "train.env_steps": 1000, "train.parallel": "sync",
                                      "train.run_dir": str(tmp_path)})

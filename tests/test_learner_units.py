@@ -14,9 +14,9 @@ import torch
 from safetensors.torch import load_file
 
 from laneshift import wire
-from laneshift.actors.exploration import make_schedule
+from laneshift.actors.exploration import HeldExploration, make_schedule
 from laneshift.actors.policy import QPolicy
-from laneshift.config import ActorConfig, LearnerConfig
+from laneshift.config import ActorConfig, ConfigError, LearnerConfig
 from laneshift.learner.dqn import DoubleDQN
 from laneshift.qnet import build_q_network
 from laneshift.qnet import load_checkpoint, load_into, save_checkpoint, tensors_digest, to_wire
@@ -328,6 +328,44 @@ def test_exponential_schedule_has_a_floor():
     assert s(100) == pytest.approx(0.99**100)
     assert s(10_000) == 0.05 and s(10**7) == 0.05
     assert make_schedule(ActorConfig(exploration="exponential", epsilon_decay_rate=0.0), 0)(10**6) == 1.0
+
+
+def test_held_exploration_holds_each_random_action_for_its_drawn_duration():
+    """ez-greedy: a random action starts with probability epsilon and is held for n ~ zeta(mu) steps
+    (cut at hold_max); the greedy action otherwise; a new episode ends the hold."""
+    rng = np.random.default_rng(0)
+    h = HeldExploration(n_envs=1, n_actions=9, mu=2.0, hold_max=100, rng=rng)
+    assert all(int(h.act(np.array([4]), epsilon=0.0)[0]) == 4 for _ in range(50))
+    # Count the holds' lengths: a hold starts whenever no action is held (epsilon 1).
+    lengths, n = [], 0
+    for _ in range(20_000):
+        started = h.left[0] == 0
+        h.act(np.array([4]), epsilon=1.0)
+        if started and n:
+            lengths.append(n)
+        if started:
+            n = 0
+        n += 1
+    weights = np.arange(1, 101, dtype=np.float64) ** -2.0
+    expected_mean = float((np.arange(1, 101) * weights).sum() / weights.sum())  # about 3.2
+    assert np.mean(lengths) == pytest.approx(expected_mean, rel=0.1)
+    assert max(lengths) <= 100 and np.mean(np.array(lengths) == 1) == pytest.approx(weights[0] / weights.sum(), abs=0.03)
+    # Held: the same action on every step of a hold.
+    h = HeldExploration(n_envs=2, n_actions=9, mu=1.5, hold_max=50, rng=np.random.default_rng(1))
+    seen = np.array([h.act(np.array([4, 4]), epsilon=0.2) for _ in range(500)])
+    assert (seen != 4).any()
+    h.act(np.array([4, 4]), epsilon=1.0)
+    h.end_episode(0)
+    assert h.left[0] == 0 and int(h.act(np.array([3, 3]), epsilon=0.0)[0]) == 3
+
+
+def test_held_exploration_is_refused_without_a_zeta_exponent():
+    with pytest.raises(ValueError, match="mu must be > 1"):
+        HeldExploration(n_envs=1, n_actions=9, mu=1.0, hold_max=10, rng=np.random.default_rng(0))
+    with pytest.raises(ConfigError, match="actor.hold_mu"):
+        ActorConfig(hold_mu=0.5)
+    with pytest.raises(ConfigError, match="actor.hold_max"):
+        ActorConfig(hold_mu=2.0, hold_max=0)
 
 
 def test_apex_per_worker_epsilons():

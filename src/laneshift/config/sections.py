@@ -178,6 +178,11 @@ class ActorConfig:
     phase2_epsilon_start: float = -1.0
     apex_epsilon: float = 0.4  # apex: eps_i = apex_epsilon ** (1 + apex_alpha * i / (N - 1))
     apex_alpha: float = 7.0  # apex: how fast the per-actor epsilons fall from the first actor to the last
+    # Temporally-extended epsilon-greedy (ez-greedy, Dabney et al. 2021): an exploratory action is held for n
+    # steps, n drawn from a zeta distribution with this exponent (their mu = 2) cut at hold_max. 0: plain
+    # epsilon-greedy, one step each (the paper's).
+    hold_mu: float = 0.0
+    hold_max: int = 100  # the longest hold [env steps] (with hold_mu > 0)
     torch_threads: int = 1  # torch threads in each worker process (its acting forward pass)
     seed: int = 0  # worker i seeds its env and exploration from seed + i
 
@@ -198,6 +203,9 @@ class ActorConfig:
                self.epsilon_decay_rate)
         _check(self.torch_threads >= 1, "actor.torch_threads", "must be >= 1", self.torch_threads)
         _check(self.apex_alpha >= 0, "actor.apex_alpha", "must be >= 0", self.apex_alpha)  # also refuses NaN
+        _check(self.hold_mu == 0.0 or self.hold_mu > 1.0, "actor.hold_mu",
+               "must be 0 (one-step exploration) or > 1 (a zeta distribution's exponent)", self.hold_mu)
+        _check(self.hold_max >= 1, "actor.hold_max", "must be >= 1", self.hold_max)
         _check(self.seed >= 0, "actor.seed", "must be >= 0", self.seed)
 
 
