@@ -349,7 +349,8 @@ def test_held_exploration_holds_each_random_action_for_its_drawn_duration():
     weights = np.arange(1, 101, dtype=np.float64) ** -2.0
     expected_mean = float((np.arange(1, 101) * weights).sum() / weights.sum())  # about 3.2
     assert np.mean(lengths) == pytest.approx(expected_mean, rel=0.1)
-    assert max(lengths) <= 100 and np.mean(np.array(lengths) == 1) == pytest.approx(weights[0] / weights.sum(), abs=0.03)
+    assert max(lengths) <= 100
+    assert np.mean(np.array(lengths) == 1) == pytest.approx(weights[0] / weights.sum(), abs=0.03)
     # Held: the same action on every step of a hold.
     h = HeldExploration(n_envs=2, n_actions=9, mu=1.5, hold_max=50, rng=np.random.default_rng(1))
     seen = np.array([h.act(np.array([4, 4]), epsilon=0.2) for _ in range(500)])

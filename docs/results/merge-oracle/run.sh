@@ -1,0 +1,8 @@
+#!/bin/bash
+# Merge from a non-target lane behind the shield: which of the 200 validation episodes (seeds from 200,000) can be
+# solved at all. The published merge-pre60k networks (seeds 0, 1, 2) and the scripted driver drive each episode;
+# the ones none of them solves go to oracle.py's search (plans driven on copies of the env). Ran 2026-11-29 at
+# revision 08cdee8 (2 min 40 s). Run from the repository root; writes here.
+set -e
+out=docs/results/merge-oracle
+python $out/oracle.py --seed0 200000 --episodes 200 --out $out | tee $out/validation.log
