@@ -144,6 +144,7 @@ def default_demo_dir(cfg: RunConfig, episodes: int) -> Path:
     shield = "-shield" if env.shield else ""  # the driver drove behind the shield
     # Episodes started outside the target lane only are other demonstrations: another shard.
     start = "" if env.initial_lane == "random" else f"-{env.initial_lane}"
+    start += "-achieved" if cfg.train.demo_achieved_only else ""  # the driver's successes only: other demos
     name = (f"{scenario}-{env.observation}{shape}-p{env.reward_preset}{shield}{start}"
             f"-scripted-v{ScriptedDriver.VERSION}-{episodes}ep")
     return Path(cfg.train.run_dir).resolve().parent / "demos" / name
@@ -160,5 +161,6 @@ def ensure_demo_shard(cfg: RunConfig, out: TextIO) -> RunConfig:
 
         print(f"train: generating the default demo shard ({episodes} scripted episodes) in {path}", file=out, flush=True)
         generate_shard(path, env_id_or_scenario=cfg.env.scenario, env_kwargs=cfg.env.env_kwargs(),
-                       episodes=episodes, seed=cfg.train.seed + 10_000)
+                       episodes=episodes, seed=cfg.train.seed + 10_000,
+                       achieved_only=cfg.train.demo_achieved_only)
     return cfg.replace(replay=dataclasses.replace(cfg.replay, demo_paths=(str(path),)))

@@ -95,6 +95,17 @@ def test_generate_refuses_existing_output(shard_dir: Path, capsys) -> None:
     assert "refusing to overwrite" in capsys.readouterr().err
 
 
+def test_generate_achieved_only_says_what_it_left_out(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "achieved"
+    assert main(["generate", "--scenario", "straight", "--episodes", "3", "--out", str(out), "--max-steps", "40",
+                 "--achieved-only"]) == 0
+    printed = capsys.readouterr().out
+    assert "achievement 100.0 %" in printed and "more driven and left out" in printed
+    assert main(["generate", "--scenario", "lka", "--episodes", "1", "--out", str(tmp_path / "lka"),
+                 "--achieved-only"]) == 2
+    assert "does not report" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("observation, max_steps", [("vector", 40), ("grayscale", 12)])
 def test_generate_straight_with_the_scripted_driver(tmp_path: Path, capsys, observation: str,
                                                     max_steps: int) -> None:

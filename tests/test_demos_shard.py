@@ -105,6 +105,29 @@ def test_same_seed_same_checksum(lka_shard: Path, tmp_path: Path) -> None:
     assert load_shard(again).sha256 == load_shard(lka_shard).sha256
 
 
+def test_a_shard_of_achieved_episodes_only_drives_on_until_it_has_its_count(tmp_path: Path) -> None:
+    """achieved_only: episodes that do not end alive on the target lane (here: 40 steps are too few
+    for some lane changes) are driven and left out; the shard holds the count asked, every one of
+    them on the target lane at its end, with the seeds they were driven with."""
+    path = generate_shard(tmp_path / "ok", env_id_or_scenario="straight", env_kwargs={"max_steps": 40},
+                          episodes=4, seed=0, achieved_only=True)
+    shard = load_shard(path)
+    meta = shard.metadata
+    assert meta["episodes"] == 4 and meta["achievement_rate"] == 1.0 and meta["achieved_only"] is True
+    assert meta["discarded_episodes"] > 0 and len(set(meta["seeds"])) == 4
+    assert meta["driven_achievement_rate"] == pytest.approx(4 / (4 + meta["discarded_episodes"]), abs=1e-6)
+    plain = load_shard(generate_shard(tmp_path / "all", env_id_or_scenario="straight", env_kwargs={"max_steps": 40},
+                                      episodes=max(meta["seeds"]) + 1, seed=0))
+    assert plain.metadata["achievement_rate"] < 1.0  # the same driver on every seed misses some
+    with pytest.raises(ValueError, match="does not report"):  # LKA has no target lane
+        generate_shard(tmp_path / "lka", env_id_or_scenario="lka", env_kwargs=LKA_KWARGS, episodes=1, seed=0,
+                       policy=SteerBack, achieved_only=True)
+    with pytest.raises(ValueError, match="fewer than the 2 asked"):  # 5 steps: no lane change ever ends
+        generate_shard(tmp_path / "none", env_id_or_scenario="straight",
+                       env_kwargs={"max_steps": 5, "initial_lane": "non-target"}, episodes=2, seed=0,
+                       achieved_only=True)
+
+
 def test_plain_minari_reads_it(lka_shard: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     import minari
 

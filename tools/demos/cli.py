@@ -86,7 +86,8 @@ def _cmd_generate(args: argparse.Namespace) -> int:
         path = generate_shard(args.out, env_id_or_scenario=args.scenario,
                               env_kwargs=env_kwargs_from_args(args), episodes=args.episodes,
                               seed=args.seed, progress="demos generate", policy=args.driver,
-                              reaction_steps=args.reaction_steps, action_noise=args.action_noise)
+                              reaction_steps=args.reaction_steps, action_noise=args.action_noise,
+                              achieved_only=args.achieved_only)
     except (FileExistsError, ValueError) as exc:  # bad arguments / existing output
         print(f"{_prog(args)}: {exc}", file=sys.stderr)
         return 2
@@ -94,6 +95,9 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     print(f"wrote {path}: {meta['episodes']} episodes, {meta['steps']} steps of {meta['env_id']} "
           f"in {meta.get('generation_seconds', float('nan')):.1f} s; demonstrator survival "
           f"{_rate(meta.get('survival_rate'))}, achievement {_rate(meta.get('achievement_rate'))}")
+    if meta.get("achieved_only"):
+        print(f"kept the episodes that ended on the target lane: {meta['discarded_episodes']} more driven and "
+              f"left out (achievement over all driven: {_rate(meta['driven_achievement_rate'])})")
     if args.driver == "human-like":  # never let a stand-in pass for a person
         print(f"recorded by: {meta['recorded_by']}")
     return 0
@@ -172,6 +176,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     generate.add_argument("--action-noise", type=_probability,
                           help="human-like: probability of a uniformly random action instead "
                                f"(default {DEFAULT_ACTION_NOISE:g}, calibrated)")
+    generate.add_argument("--achieved-only", action="store_true",
+                          help="keep only episodes that end alive on the target lane, driving further seeds "
+                               "until EPISODES are kept (lane-change scenarios)")
     generate.set_defaults(func=_cmd_generate)
 
     record = subparsers.add_parser(

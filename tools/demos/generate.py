@@ -33,10 +33,22 @@ from pathlib import Path
 from laneshift.progress import progress as progress_bar
 from .drivers import Driver, PolicyFactory, run_episode, scripted_driver
 from laneshift.demos.envsupport import make_env, resolve_env_id
+from laneshift.demos.outcomes import episode_outcome
 from .humanlike import DEFAULT_ACTION_NOISE, DEFAULT_REACTION_STEPS, HumanLikePolicy
 from .writer import check_out_dir, write_shard
 
 POLICIES = ("scripted", "human-like")
+#: ``achieved_only``: how many episodes may be driven per episode kept before the shard is refused.
+MAX_DRIVEN_PER_KEPT = 10
+
+
+def _achieved(episode: dict) -> bool:
+    """Did the episode end alive on the target lane? (ValueError: its env does not say.)"""
+    outcome = episode_outcome(episode["infos"][-1])
+    if outcome["on_target_lane"] is None or outcome["crashed"] is None:
+        raise ValueError("achieved_only: this env's info does not report 'crashed' and 'on_target_lane' "
+                         "(only the lane-change scenarios do)")
+    return outcome["on_target_lane"] and not outcome["crashed"]
 
 
 def _driver_name(policy: PolicyFactory, driver: Driver) -> str:
@@ -56,6 +68,7 @@ def generate_shard(
     progress: str | None = None,
     reaction_steps: int | None = None,
     action_noise: float | None = None,
+    achieved_only: bool = False,
 ) -> Path:
     """Run ``episodes`` demonstrator episodes and write them as a shard at ``out_dir``.
 
@@ -63,6 +76,11 @@ def generate_shard(
     ``reaction_steps`` / ``action_noise``: the human-like stand-in's delay and noise (only with
     ``policy="human-like"``; default the calibrated :data:`~.humanlike.DEFAULT_REACTION_STEPS`,
     :data:`~.humanlike.DEFAULT_ACTION_NOISE`).
+    ``achieved_only``: keep only episodes that end alive on the target lane, driving further seeds
+    (``seed + episodes``, ...) until ``episodes`` are kept, at most ``MAX_DRIVEN_PER_KEPT`` times as
+    many in all (ValueError beyond, and for an env whose info does not say where the episode ended).
+    The shard's ``seeds`` are the kept episodes'; its metadata adds ``achieved_only``,
+    ``discarded_episodes`` and ``driven_achievement_rate`` (the rate over every episode driven).
 
     The shard's metadata records the demonstrator's ``survival_rate`` (share of episodes
     without a crash) and ``achievement_rate`` (share ending on the target lane), each None
@@ -94,22 +112,37 @@ def generate_shard(
     try:
         env.action_space.seed(seed)
         started = time.perf_counter()
-        recorded, names = [], set()
-        for i in progress_bar(range(episodes), desc=progress or "", unit="episode", disable=progress is None):
-            driver = policy(env)  # fresh per episode: no state leaks between episodes
-            # The stand-in wraps the expert: name the expert that it degrades.
-            names.add(_driver_name(policy, getattr(driver, "inner", driver) if human_like else driver))
-            recorded.append(run_episode(env, driver, seed + i))
+        recorded, seeds, names, discarded = [], [], set(), 0
+        with progress_bar(total=episodes, desc=progress or "", unit="episode", disable=progress is None) as bar:
+            for i in range(episodes * (MAX_DRIVEN_PER_KEPT if achieved_only else 1)):
+                driver = policy(env)  # fresh per episode: no state leaks between episodes
+                # The stand-in wraps the expert: name the expert that it degrades.
+                names.add(_driver_name(policy, getattr(driver, "inner", driver) if human_like else driver))
+                episode = run_episode(env, driver, seed + i)
+                if achieved_only and not _achieved(episode):
+                    discarded += 1
+                    continue
+                recorded.append(episode)
+                seeds.append(seed + i)
+                bar.update(1)
+                if len(recorded) == episodes:
+                    break
+        if len(recorded) < episodes:
+            raise ValueError(f"achieved_only: {len(recorded)} of {len(recorded) + discarded} episodes driven ended "
+                             f"on the target lane, fewer than the {episodes} asked")
         seconds = time.perf_counter() - started
         if human_like is not None:
             extra = human_like.metadata(env)
+        if achieved_only:
+            extra = {**extra, "achieved_only": True, "discarded_episodes": discarded,
+                     "driven_achievement_rate": round(episodes / (episodes + discarded), 6)}
         return write_shard(
             out_dir,
             recorded,
             env_id=env_id,
             env_kwargs=env_kwargs,
             recorded_by=recorded_by,
-            seeds=[seed + i for i in range(episodes)],
+            seeds=seeds,
             env=env,
             extra_metadata={
                 "driver": driver_kind,

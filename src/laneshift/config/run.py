@@ -70,6 +70,9 @@ class TrainConfig:
     # Scripted episodes in the default demo shard (demo modes without replay.demo_paths);
     # 0 = just enough for the demo region (retention) or 2,000 transitions (rehearsal).
     demo_episodes: int = 0
+    # The default demo shard keeps only the scripted driver's episodes that end alive on the target lane
+    # (it drives further seeds until it has its count): the demonstrations never show a wait that fails.
+    demo_achieved_only: bool = False
     seed: int = 0  # the default demo shard's episode seeds start at seed + 10,000; `experiment` commands give it to every component
 
     def __post_init__(self) -> None:
