@@ -6,6 +6,6 @@
 set -e
 out=docs/results/merge-oracle
 python $out/oracle.py --seed0 200000 --episodes 200 --out $out | tee $out/validation.log
-# The same on the 200 test episodes (seeds from 100,000), run 2026-11-29 at revision ceece6e after every choice that
+# The same on the 200 test episodes (seeds from 100,000), run 2026-11-29 at revision 092a025 after every choice that
 # the validation episodes served had been made (no choice rests on it; it states what the road allows there):
 python $out/oracle.py --seed0 100000 --episodes 200 --out $out/test | tee $out/test/test.log
