@@ -12,7 +12,7 @@ the same arguments give the same shard, checksum included.
 The drivers and the episode loop are in ``drivers`` (shared with ``humanlike``).
 
 Imports: laneshift.progress and the demos package (``drivers``, which imports laneshift's
-demonstrators lazily; ``humanlike``, ``envsupport``, ``writer``).
+demonstrators lazily; ``humanlike``, ``envsupport``, ``outcomes``, ``writer``).
 
 Example::
 
