@@ -3,7 +3,7 @@ the shield's rule calls the lane free ("or"), or the shield's alone; run from th
 
 Room: a study's script beside its results (run by path, not installed). May import: laneshift, numpy.
 """
-import copy, sys, json
+import sys
 sys.path.insert(0, "docs/results/merge-oracle")
 from oracle import drive, ENV, make
 from laneshift.actors.envs.demonstrator import ScriptedDriver

@@ -36,6 +36,8 @@ from laneshift.actors.envs.control import curvature_index, lane_errors, speed_in
 from laneshift.actors.envs.demonstrator import ScriptedDriver
 from laneshift.actors.evaluation import load_greedy_policy
 from laneshift.config import EnvConfig
+from laneshift.demos.outcomes import episode_outcome
+from laneshift.tools.demos.drivers import drive_to_end
 
 CHECKPOINTS = "results/checkpoints/merge-pre60k-dqfd-bc-alongside-gaps-safe-shield-seed{}-final.safetensors"
 ENV = EnvConfig(scenario="merge", max_steps=300, alongside_features=True, gap_features=True, shield=True,
@@ -85,13 +87,12 @@ def plans():
 
 
 def drive(env, policy, obs) -> dict:
-    """Drive ``env`` (already reset; ``obs`` its observation) to the end with ``policy``."""
-    done, info, steps = False, {}, 0
-    while not done:
-        obs, _, terminated, truncated, info = env.step(int(policy(obs)))
-        done, steps = terminated or truncated, steps + 1
-    survived = not info["crashed"]
-    return {"survived": survived, "achieved": survived and bool(info["on_target_lane"]), "steps": steps}
+    """Drive ``env`` (already reset; ``obs`` its observation) to the end with ``policy``: the demo tools' episode
+    loop, and the paper's outcome of its last step (a crash on the target lane is no achievement)."""
+    episode = drive_to_end(env, policy, obs, {})
+    outcome = episode_outcome(episode["infos"][-1])
+    survived = not outcome["crashed"]
+    return {"survived": survived, "achieved": survived and outcome["on_target_lane"], "steps": len(episode["actions"])}
 
 
 def main() -> None:

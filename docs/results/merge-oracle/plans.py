@@ -3,7 +3,7 @@ target lane whenever the shield calls it free) on all 200; run from the reposito
 
 Room: a study's script beside its results (run by path, not installed). May import: laneshift, numpy.
 """
-import copy, sys, json
+import sys
 sys.path.insert(0, "docs/results/merge-oracle")
 from oracle import SpeedPlan, drive, ENV, make
 env = make(ENV); u = env.unwrapped

@@ -4,7 +4,7 @@ and the speed every 30 steps (* off lane 0). Run from the repository root.
 
 Room: a study's script beside its results (run by path, not installed). May import: laneshift, numpy.
 """
-import copy, sys
+import sys
 sys.path.insert(0, "docs/results/merge-oracle")
 from oracle import SpeedPlan, ENV, make, load_greedy_policy, CHECKPOINTS
 from laneshift.actors.envs.demonstrator import ScriptedDriver
