@@ -161,6 +161,6 @@ def test_the_default_demo_shard_of_non_target_starts_has_its_own_name():
     assert "-non-target-scripted-v" in default_demo_dir(non_target, 40).name
     # The driver's successes only (train.demo_achieved_only) are other demonstrations too.
     achieved = random_lane.replace(train=dataclasses.replace(random_lane.train, demo_achieved_only=True))
-    assert "-shield" not in default_demo_dir(achieved, 40).name
+    assert default_demo_dir(achieved, 40) != default_demo_dir(random_lane, 40)
     assert default_demo_dir(achieved, 40).name == default_demo_dir(random_lane, 40).name.replace(
         "-scripted-v", "-achieved-scripted-v")
