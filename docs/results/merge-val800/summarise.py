@@ -118,7 +118,7 @@ def main(out: Path) -> None:
               f"[{lo:+.1f}, {hi:+.1f}] (95 %, episodes and seeds resampled, {RESAMPLES:,} times)")
     print("\nAchievement by the lane an episode starts in (non-target setting; lane 0 is the fast lane; a recipe's "
           "seeds pooled):\n")
-    starts = sorted({k for eps in runs.values() for _, _, k in eps.values()})
+    starts = sorted({k for (_, lane), eps in runs.items() if lane == "non-target" for _, _, k in eps.values()})
     print("| run | " + " | ".join(f"start lane {k}" for k in starts) + " |")
     print("|---|" + "---|" * len(starts))
     for label, members in [(recipe, [r for r in names if r.rsplit("-s", 1)[0] == recipe]) for recipe in RECIPES] + \
@@ -126,7 +126,7 @@ def main(out: Path) -> None:
         cells = []
         for k in starts:
             hits = [a for r in members for _, a, lane in runs[(r, "non-target")].values() if lane == k]
-            cells.append(f"{100 * np.mean(hits):.1f} ({len(hits) // len(members)} episodes)" if hits else "-")
+            cells.append(f"{100 * np.mean(hits):.1f} ({len(hits) // len(members)} episodes)")
         print(f"| {label} | " + " | ".join(cells) + " |")
 
 
