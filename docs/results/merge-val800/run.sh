@@ -28,5 +28,8 @@ printf '%s\n' "${jobs[@]}" | xargs -P 2 -I{} bash -c '
   IFS="|" read -r name lane who <<< "{}"
   out="'"$OUT"'/$name-$lane.jsonl"
   [ -s "$out" ] && exit 0  # done by an earlier call: the same command resumes
-  '"$LANESHIFT"' eval $who '"$ENV"' --initial-lane $lane --episodes-out "$out.part" > /dev/null && mv "$out.part" "$out"
-  echo "$name $lane done"'
+  if '"$LANESHIFT"' eval $who '"$ENV"' --initial-lane $lane --episodes-out "$out.part" > /dev/null; then
+    mv "$out.part" "$out" && echo "$name $lane done"
+  else
+    echo "$name $lane FAILED" >&2; exit 1
+  fi'
