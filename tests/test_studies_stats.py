@@ -8,7 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from laneshift.tools.studies.stats import bootstrap_ci, common_range, curves_on_grid, drop_noise_floor
+from laneshift.tools.studies.stats import (bootstrap_ci, common_range, curves_on_grid, drop_noise_floor,
+                                          paired_difference_ci)
 
 
 def test_identical_runs_give_a_zero_width_interval_at_their_value():
@@ -107,3 +108,34 @@ def test_drop_noise_floor_of_a_constant_policy_shrinks_with_the_episodes_per_eva
     assert drop_noise_floor(1.0, 20, 10, 0.93) == {"median": 0.0, "p90": 0.0, "share_above_5_points": 0.0}
     assert drop_noise_floor(0.5, 20, 10, 0.99, draws=200) is None  # never reaches the target
     assert drop_noise_floor(0.96, 20, 10, 0.93) == few  # seeded
+
+
+def test_paired_difference_of_equal_groups_is_centred_on_zero():
+    rng = np.random.default_rng(1)
+    outcomes = (rng.random((3, 400)) < 0.9).astype(float)
+    lo, hi = paired_difference_ci(outcomes, outcomes, resamples=2000)
+    assert lo < 0.0 < hi
+
+
+def test_paired_difference_resolves_a_clear_lead_and_holds_its_mean():
+    rng = np.random.default_rng(2)
+    episodes_hard = rng.random(800) < 0.1  # the same hard episodes for both groups: paired
+    nets = np.array([~episodes_hard | (rng.random(800) < 0.5) for _ in range(3)], dtype=float)
+    driver = (~episodes_hard).astype(float)[None, :]
+    lead = nets.mean() - driver.mean()
+    lo, hi = paired_difference_ci(nets, driver, resamples=2000)
+    assert 0.0 < lo < lead < hi
+
+
+def test_paired_difference_widens_with_fewer_episodes():
+    rng = np.random.default_rng(3)
+    a = (rng.random((3, 800)) < 0.92).astype(float)
+    b = (rng.random((3, 800)) < 0.90).astype(float)
+    wide = np.subtract(*paired_difference_ci(a[:, :200], b[:, :200], resamples=2000))
+    narrow = np.subtract(*paired_difference_ci(a, b, resamples=2000))
+    assert abs(wide) > abs(narrow)
+
+
+def test_paired_difference_refuses_groups_over_other_episodes():
+    with pytest.raises(ValueError, match="same episodes"):
+        paired_difference_ci(np.ones((3, 10)), np.ones((1, 9)))

@@ -11,6 +11,9 @@ understates the uncertainty when there are two seeds.
   curve per run (every point resampled with the same runs, so a band is one set of resamples).
 - :func:`curves_on_grid`: per-run curves (already smoothed) put on a common x grid (env steps,
   wall-clock seconds) over the range every run covers, with their mean and bootstrap band.
+- :func:`paired_difference_ci`: the interval of a difference between two groups of runs that drove the same
+  episodes (recipe against recipe, networks against the driver), resampling the episodes as well as the runs: with
+  a few hundred fixed episodes their draw is as large a part of the uncertainty as the seeds.
 - :func:`drop_noise_floor`: how far a policy that never changes falls below its running best on
   evaluations of a few episodes, so that a measured drop can be told from evaluation noise.
 
@@ -58,6 +61,34 @@ def bootstrap_ci(values: Sequence[float] | np.ndarray, confidence: float = 0.95,
         return float(lo[0]), float(hi[0])
     return lo, hi
 
+
+
+def paired_difference_ci(a: Sequence[Sequence[float]] | np.ndarray, b: Sequence[Sequence[float]] | np.ndarray,
+                         confidence: float = 0.95, resamples: int = RESAMPLES, seed: int = SEED) -> tuple[float, float]:
+    """Percentile bootstrap interval of ``mean(a) - mean(b)`` for two groups of runs on the same episodes.
+
+    ``a``, ``b``: one row per run, one column per episode (an outcome such as 0/1 achieved), the columns the same
+    episodes in the same order. Each resample draws the episodes with replacement (the same draw for both groups:
+    they are paired) and, within each group, its runs with replacement. A group of one run (the scripted driver) is
+    resampled over its episodes only.
+    """
+    x, y = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if x.ndim != 2 or y.ndim != 2 or x.shape[0] == 0 or y.shape[0] == 0 or x.shape[1] != y.shape[1] or not x.shape[1]:
+        raise ValueError(f"paired_difference_ci: expected (runs, episodes) arrays over the same episodes, got "
+                         f"shapes {x.shape} and {y.shape}")
+    if not 0.0 < confidence < 1.0:
+        raise ValueError(f"paired_difference_ci: confidence must be in (0, 1), got {confidence}")
+    rng = np.random.default_rng(seed)
+    episodes = x.shape[1]
+    diffs = np.empty(resamples)
+    for i in range(resamples):
+        eps = rng.integers(0, episodes, episodes)
+        xa = x[rng.integers(0, x.shape[0], x.shape[0])][:, eps].mean()
+        yb = y[rng.integers(0, y.shape[0], y.shape[0])][:, eps].mean()
+        diffs[i] = xa - yb
+    alpha = (1.0 - confidence) / 2.0
+    lo, hi = np.quantile(diffs, [alpha, 1.0 - alpha])
+    return float(lo), float(hi)
 
 def common_range(xs: Sequence[np.ndarray]) -> tuple[float, float] | None:
     """The x range every run covers: (latest start, earliest end), or None if they do not overlap
