@@ -62,7 +62,6 @@ def bootstrap_ci(values: Sequence[float] | np.ndarray, confidence: float = 0.95,
     return lo, hi
 
 
-
 def paired_difference_ci(a: Sequence[Sequence[float]] | np.ndarray, b: Sequence[Sequence[float]] | np.ndarray,
                          confidence: float = 0.95, resamples: int = RESAMPLES, seed: int = SEED) -> tuple[float, float]:
     """Percentile bootstrap interval of ``mean(a) - mean(b)`` for two groups of runs on the same episodes.
@@ -89,6 +88,7 @@ def paired_difference_ci(a: Sequence[Sequence[float]] | np.ndarray, b: Sequence[
     alpha = (1.0 - confidence) / 2.0
     lo, hi = np.quantile(diffs, [alpha, 1.0 - alpha])
     return float(lo), float(hi)
+
 
 def common_range(xs: Sequence[np.ndarray]) -> tuple[float, float] | None:
     """The x range every run covers: (latest start, earliest end), or None if they do not overlap

@@ -41,13 +41,13 @@ def main(out: Path) -> None:
             seeds = sorted(r for r, ln in runs if ln == lane and r.startswith(road + "-s"))
             if not seeds or (road + "-driver", lane) not in runs:
                 continue
-            order = sorted(runs[(road + "-driver", lane)])
+            driver = runs[(road + "-driver", lane)]
+            order = sorted(driver)
             if any(sorted(runs[(r, lane)]) != order for r in seeds):
                 raise SystemExit(f"{road} {lane}: the networks and the driver drove different episodes")
             nets = np.array([[(runs[(r, lane)][e].survived, runs[(r, lane)][e].achieved) for e in order]
                              for r in seeds], dtype=float)  # [seed, episode, (survived, achieved)]
-            drv = np.array([(runs[(road + "-driver", lane)][e].survived, runs[(road + "-driver", lane)][e].achieved)
-                            for e in order], dtype=float)
+            drv = np.array([(driver[e].survived, driver[e].achieved) for e in order], dtype=float)
             lo, hi = (100 * x for x in paired_difference_ci(nets[:, :, 1], drv[None, :, 1]))
             per = ", ".join(f"{100 * a:.1f}" for a in nets[:, :, 1].mean(axis=1))
             lead = 100 * (nets[:, :, 1].mean() - drv[:, 1].mean())
