@@ -4,7 +4,7 @@
 # steps, seeds 0-2; results/checkpoints/) and the scripted driver behind the same shield, on 800 FRESH validation
 # episodes per initial-lane setting (episode seeds 200,200-200,999, 300 steps): never used for any choice before (the
 # holding was chosen on 200,000-200,199, and the test episodes start at 100,000 and are not read here). Optional:
-# the stopped probes' seed-1 networks (EXTRA="name=path ..."). Two evaluations at a time (the machine's 2 CPUs).
+# the stopped probes' seed-1 networks (EXTRA="name=path ..."); ONLY_EXTRA=1 drives those alone. Two evaluations at a time (the machine's 2 CPUs).
 # From the repository's root:
 #   bash docs/results/merge-val800/run.sh OUT_DIR
 #   python docs/results/merge-val800/summarise.py OUT_DIR > docs/results/merge-val800/table.md
@@ -15,8 +15,9 @@ ENV="--scenario merge --episodes 800 --seed 200200 --max-steps 300 --set env.alo
 --set env.gap_features=true --set env.shield=true"
 jobs=()
 for lane in non-target random; do
-  jobs+=("driver|$lane|--driver scripted")
+  [ -n "$ONLY_EXTRA" ] || jobs+=("driver|$lane|--driver scripted")
   for recipe in merge-pre60k-hold merge-pre60k; do
+    [ -n "$ONLY_EXTRA" ] && break
     for s in 0 1 2; do
       ckpt=results/checkpoints/$recipe-dqfd-bc-alongside-gaps-safe-shield-seed$s-final.safetensors
       jobs+=("$recipe-s$s|$lane|--checkpoint $ckpt")
