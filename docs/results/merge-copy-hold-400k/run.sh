@@ -14,19 +14,23 @@
 # are not driven. The rule (written 2026-12-01 before D ran): worth the other two seeds if D's achievement from a
 # non-target lane is at least 1.0 point above the holding recipe's seed 1 and from a random lane not more than 1.0
 # below it; otherwise stopped.
-#   bash docs/results/merge-copy-hold-400k/run.sh RUNS_DIR EVAL_DIR
+# The other seeds, once the rule says so: SEED=0 and SEED=2 (the same training and the same episodes, each paired
+# with the published holding network of its seed).
+#   [SEED=N] bash docs/results/merge-copy-hold-400k/run.sh RUNS_DIR EVAL_DIR
 set -e
+SEED=${SEED:-1}
 RUNS=${1:?usage: run.sh RUNS_DIR EVAL_DIR}
 EVAL=${2:?usage: run.sh RUNS_DIR EVAL_DIR}
 LANESHIFT=${LANESHIFT:-laneshift}
-dir=$RUNS/D-s1
-if [ ! -s "$dir/checkpoints/final.safetensors" ]; then
+dir=$RUNS/D-s$SEED
+# Finished = its summary says the budget ended it (a run stopped by a signal also writes final.safetensors).
+if ! grep -qs '"ended_by": "done"' "$dir/summary.json"; then
   if [ -e "$dir/config.yaml" ]; then
     $LANESHIFT train --resume "$dir" >> "$dir.log" 2>&1
   else
     mkdir -p "$RUNS"
     $LANESHIFT train --scenario merge --method dqfd-bc-alongside-gaps-safe-shield --env-steps 400000 \
-      --set env.max_steps=300 --set learner.phase1_updates=60000 --set actor.hold_mu=2 --set train.seed=1 \
+      --set env.max_steps=300 --set learner.phase1_updates=60000 --set actor.hold_mu=2 --set train.seed=$SEED \
       --set learner.phase1_td=false --set train.demo_episodes=2000 --set replay.capacity=800000 \
       --set replay.demo_ratio=0.74 --run-dir "$dir" > "$dir.log" 2>&1
   fi
@@ -34,10 +38,10 @@ fi
 mkdir -p "$EVAL"
 ENV="--scenario merge --episodes 1000 --seed 201000 --max-steps 300 --set env.alongside_features=true \
 --set env.gap_features=true --set env.shield=true"
-hold=results/checkpoints/merge-pre60k-hold-dqfd-bc-alongside-gaps-safe-shield-seed1-final.safetensors
+hold=results/checkpoints/merge-pre60k-hold-dqfd-bc-alongside-gaps-safe-shield-seed$SEED-final.safetensors
 for lane in non-target random; do
-  for job in "driver|--driver scripted" "merge-pre60k-hold-s1|--checkpoint $hold" \
-             "D-s1|--checkpoint $dir/checkpoints/final.safetensors"; do
+  for job in "driver|--driver scripted" "merge-pre60k-hold-s$SEED|--checkpoint $hold" \
+             "D-s$SEED|--checkpoint $dir/checkpoints/final.safetensors"; do
     echo "${job%%|*}|$lane|${job#*|}"
   done
 done | xargs -P 2 -I{} bash -c '

@@ -24,7 +24,8 @@ COMMON="--scenario merge --method dqfd-bc-alongside-gaps-safe-shield --env-steps
 --set learner.phase1_updates=60000 --set train.seed=1"
 train() {  # name, extra settings; a finished run is skipped, a stopped one resumed
   local dir=$RUNS/$1; shift
-  [ -s "$dir/checkpoints/final.safetensors" ] && return 0
+  # finished = ended by its budget (a run stopped by a signal also writes final.safetensors)
+  grep -qs '"ended_by": "done"' "$dir/summary.json" && return 0
   if [ -e "$dir/config.yaml" ]; then
     $LANESHIFT train --resume "$dir" > "$dir.log" 2>&1
   else
