@@ -66,9 +66,10 @@ def main(out: Path) -> None:
         for label, names in ((LABELS[HOLD], [f"{HOLD}-s{s}" for s in seeds]), (LABELS["driver"], ["driver"])):
             base = matrix(runs, names, lane, order)
             lo, hi = paired_difference_ci(probe, base)
+            resampled = "episodes and seeds" if len(seeds) > 1 else "episodes"
             print(f"- {lane} lane, seeds {', '.join(map(str, seeds))}: D minus {label}: "
                   f"{100 * (probe.mean() - base.mean()):+.1f} points [{100 * lo:+.1f}, {100 * hi:+.1f}] (95 %, "
-                  f"episodes{' and seeds' if len(names) > 1 or len(seeds) > 1 else ''} resampled, paired, {RESAMPLES:,} times)")
+                  f"{resampled} resampled, paired, {RESAMPLES:,} times)")
     if 1 in seeds:
         lift = {lane: 100 * (matrix(runs, [f"{PROBE}-s1"], lane, order).mean()
                              - matrix(runs, [f"{HOLD}-s1"], lane, order).mean()) for lane in LANES}
