@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from laneshift.tools.studies.outcome_files import Outcome, read_outcomes, write_outcomes_csv
+from laneshift.tools.studies.outcome_files import Outcome, achievement_by_start_lane, read_outcomes, write_outcomes_csv
 
 
 def _episodes_out(path: Path, first_seed: int, outcomes: list[tuple[bool, bool, int]]) -> None:
@@ -43,3 +43,11 @@ def test_episode_seeds_with_a_gap_cannot_be_kept_as_strings(tmp_path: Path) -> N
     runs = {("net", "random"): {0: Outcome(True, True, 0), 2: Outcome(True, True, 0)}}
     with pytest.raises(ValueError, match="consecutive"):
         write_outcomes_csv(runs, tmp_path / "episodes.csv")
+
+
+def test_achievement_by_start_lane_pools_the_runs_and_counts_episodes_per_run(tmp_path: Path) -> None:
+    _episodes_out(tmp_path / "a-s0-non-target.jsonl", 200200, [(True, True, 0), (True, False, 2), (False, False, 0)])
+    _episodes_out(tmp_path / "a-s1-non-target.jsonl", 200200, [(True, True, 0), (True, True, 2), (True, True, 0)])
+    runs = read_outcomes(tmp_path)
+    assert achievement_by_start_lane(runs, ["a-s0"]) == {0: (0.5, 2), 2: (0.0, 1)}
+    assert achievement_by_start_lane(runs, ["a-s0", "a-s1"]) == {0: (0.75, 2), 2: (0.5, 1)}

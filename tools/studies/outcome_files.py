@@ -67,3 +67,15 @@ def write_outcomes_csv(runs: Outcomes, path: Path) -> None:
             w.writerow([run, lane, seeds[0], "".join(str(int(eps[e].survived)) for e in seeds),
                         "".join(str(int(eps[e].achieved)) for e in seeds),
                         "".join(str(eps[e].start_lane) for e in seeds)])
+
+
+def achievement_by_start_lane(runs: Outcomes, names: list[str],
+                              lane: str = "non-target") -> dict[int, tuple[float, int]]:
+    """{start lane: (achievement rate of ``names``' episodes pooled, episodes per run)} in the ``lane`` setting: where
+    the studies' tables split a setting by the lane an episode starts in (merge: the fast lane 0, the on-ramp 2)."""
+    starts = sorted({o.start_lane for name in names for o in runs[(name, lane)].values()})
+    out = {}
+    for start in starts:
+        hits = [o.achieved for name in names for o in runs[(name, lane)].values() if o.start_lane == start]
+        out[start] = (sum(hits) / len(hits), len(hits) // len(names))
+    return out

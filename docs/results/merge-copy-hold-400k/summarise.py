@@ -19,7 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from laneshift.tools.studies.outcome_files import LANES, Outcomes, read_outcomes, write_outcomes_csv
+from laneshift.tools.studies.outcome_files import (LANES, Outcomes, achievement_by_start_lane, read_outcomes,
+                                                    write_outcomes_csv)
 from laneshift.tools.studies.stats import RESAMPLES, paired_difference_ci
 
 HERE = Path(__file__).parent
@@ -55,9 +56,8 @@ def main(out: Path) -> None:
     for label, names in groups:
         cells = [f"{100 * matrix(runs, names, lane, order, 'survived').mean():.1f} / "
                  f"{100 * matrix(runs, names, lane, order).mean():.1f}" for lane in LANES]
-        for k in starts:
-            hits = [o.achieved for r in names for o in runs[(r, "non-target")].values() if o.start_lane == k]
-            cells.append(f"{100 * np.mean(hits):.1f} ({len(hits) // len(names)})")
+        by_start = achievement_by_start_lane(runs, names)
+        cells += [f"{100 * by_start[k][0]:.1f} ({by_start[k][1]})" for k in starts]
         print(f"| {label} | " + " | ".join(cells) + " |")
     print()
     probe_names = [f"{PROBE}-s{s}" for s in seeds]

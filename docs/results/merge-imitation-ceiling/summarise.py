@@ -20,7 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from laneshift.tools.studies.outcome_files import LANES, Outcomes, read_outcomes, write_outcomes_csv
+from laneshift.tools.studies.outcome_files import (LANES, Outcomes, achievement_by_start_lane, read_outcomes,
+                                                    write_outcomes_csv)
 from laneshift.tools.studies.stats import RESAMPLES, paired_difference_ci
 
 HERE = Path(__file__).parent
@@ -74,11 +75,9 @@ def main(out: Path) -> None:
     print("| network | " + " | ".join(f"start lane {k}" for k in starts) + " |")
     print("|---|" + "---|" * len(starts))
     for name, members in [*groups.items(), ("driver", ["driver"])]:
-        cells = []
-        for k in starts:
-            hits = [o.achieved for r in members for o in runs[(r, "non-target")].values() if o.start_lane == k]
-            cells.append(f"{100 * np.mean(hits):.1f} ({len(hits) // len(members)} episodes)")
-        print(f"| {labels.get(name, 'the scripted driver')} | " + " | ".join(cells) + " |")
+        by_start = achievement_by_start_lane(runs, members)
+        print(f"| {labels.get(name, 'the scripted driver')} | "
+              + " | ".join(f"{100 * by_start[k][0]:.1f} ({by_start[k][1]} episodes)" for k in starts) + " |")
 
 
 if __name__ == "__main__":

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from laneshift.tools.studies.outcome_files import LANES, read_outcomes, write_outcomes_csv
+from laneshift.tools.studies.outcome_files import LANES, achievement_by_start_lane, read_outcomes, write_outcomes_csv
 from laneshift.tools.studies.stats import RESAMPLES, paired_difference_ci
 
 RECIPES = {"merge-pre60k-hold": "with the holding (`actor.hold_mu=2`; published)",
@@ -72,11 +72,9 @@ def main(out: Path) -> None:
     print("| run | " + " | ".join(f"start lane {k}" for k in starts) + " |")
     print("|---|" + "---|" * len(starts))
     for label, group in list(members.items()) + [(run, [run]) for run in others]:
-        cells = []
-        for k in starts:
-            hits = [o.achieved for r in group for o in runs[(r, "non-target")].values() if o.start_lane == k]
-            cells.append(f"{100 * np.mean(hits):.1f} ({len(hits) // len(group)} episodes)")
-        print(f"| {label} | " + " | ".join(cells) + " |")
+        by_start = achievement_by_start_lane(runs, group)
+        print(f"| {label} | " + " | ".join(f"{100 * by_start[k][0]:.1f} ({by_start[k][1]} episodes)" for k in starts)
+              + " |")
 
 
 if __name__ == "__main__":
