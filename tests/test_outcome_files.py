@@ -11,7 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from laneshift.tools.studies.outcome_files import Outcome, achievement_by_start_lane, read_outcomes, write_outcomes_csv
+from laneshift.tools.studies.outcome_files import (Outcome, achievement_by_start_lane, outcome_rows, read_outcomes,
+                                                    write_outcomes_csv)
 
 
 def _episodes_out(path: Path, first_seed: int, outcomes: list[tuple[bool, bool, int]]) -> None:
@@ -51,3 +52,12 @@ def test_achievement_by_start_lane_pools_the_runs_and_counts_episodes_per_run(tm
     runs = read_outcomes(tmp_path)
     assert achievement_by_start_lane(runs, ["a-s0"]) == {0: (0.5, 2), 2: (0.0, 1)}
     assert achievement_by_start_lane(runs, ["a-s0", "a-s1"]) == {0: (0.75, 2), 2: (0.5, 1)}
+
+
+def test_outcome_rows_are_one_row_per_run_in_the_given_episode_order(tmp_path: Path) -> None:
+    _episodes_out(tmp_path / "a-s0-random.jsonl", 200200, [(True, True, 0), (True, False, 2), (False, False, 0)])
+    _episodes_out(tmp_path / "a-s1-random.jsonl", 200200, [(False, False, 0), (True, True, 2), (True, True, 0)])
+    runs = read_outcomes(tmp_path)
+    order = [200202, 200200]
+    assert outcome_rows(runs, ["a-s0", "a-s1"], "random", order) == [[0.0, 1.0], [1.0, 0.0]]
+    assert outcome_rows(runs, ["a-s0"], "random", order, "survived") == [[0.0, 1.0]]

@@ -69,6 +69,13 @@ def write_outcomes_csv(runs: Outcomes, path: Path) -> None:
                         "".join(str(eps[e].start_lane) for e in seeds)])
 
 
+def outcome_rows(runs: Outcomes, names: list[str], lane: str, order: list[int],
+                 key: str = "achieved") -> list[list[float]]:
+    """One row per run of ``names`` in the ``lane`` setting, one 0/1 column per episode seed of ``order``: ``key``
+    ('survived' or 'achieved'). The shape :func:`laneshift.tools.studies.stats.paired_difference_ci` takes."""
+    return [[float(getattr(runs[(name, lane)][e], key)) for e in order] for name in names]
+
+
 def achievement_by_start_lane(runs: Outcomes, names: list[str],
                               lane: str = "non-target") -> dict[int, tuple[float, int]]:
     """{start lane: (achievement rate of ``names``' episodes pooled, episodes per run)} in the ``lane`` setting: where

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from laneshift.tools.studies.outcome_files import (LANES, Outcomes, achievement_by_start_lane, read_outcomes,
+from laneshift.tools.studies.outcome_files import (LANES, achievement_by_start_lane, outcome_rows, read_outcomes,
                                                     write_outcomes_csv)
 from laneshift.tools.studies.stats import RESAMPLES, paired_difference_ci
 
@@ -27,10 +27,6 @@ HERE = Path(__file__).parent
 PROBE, HOLD = "D", "merge-pre60k-hold"
 LABELS = {PROBE: "D: copy then hold", HOLD: "the holding recipe, published", "driver": "the scripted driver"}
 
-
-def matrix(runs: Outcomes, names: list[str], lane: str, order: list[int], key: str = "achieved") -> np.ndarray:
-    """(runs, episodes) 0/1 array of ``key`` in ``order``'s episode seeds."""
-    return np.array([[getattr(runs[(r, lane)][e], key) for e in order] for r in names], float)
 
 
 def main(out: Path) -> None:
@@ -54,25 +50,25 @@ def main(out: Path) -> None:
                    for name in (PROBE, HOLD)]
     groups.append((LABELS["driver"] + " behind the shield", ["driver"]))
     for label, names in groups:
-        cells = [f"{100 * matrix(runs, names, lane, order, 'survived').mean():.1f} / "
-                 f"{100 * matrix(runs, names, lane, order).mean():.1f}" for lane in LANES]
+        cells = [f"{100 * np.array(outcome_rows(runs, names, lane, order, 'survived')).mean():.1f} / "
+                 f"{100 * np.array(outcome_rows(runs, names, lane, order)).mean():.1f}" for lane in LANES]
         by_start = achievement_by_start_lane(runs, names)
         cells += [f"{100 * by_start[k][0]:.1f} ({by_start[k][1]})" for k in starts]
         print(f"| {label} | " + " | ".join(cells) + " |")
     print()
     probe_names = [f"{PROBE}-s{s}" for s in seeds]
     for lane in LANES:
-        probe = matrix(runs, probe_names, lane, order)
+        probe = np.array(outcome_rows(runs, probe_names, lane, order))
         for label, names in ((LABELS[HOLD], [f"{HOLD}-s{s}" for s in seeds]), (LABELS["driver"], ["driver"])):
-            base = matrix(runs, names, lane, order)
+            base = np.array(outcome_rows(runs, names, lane, order))
             lo, hi = paired_difference_ci(probe, base)
             resampled = "episodes and seeds" if len(seeds) > 1 else "episodes"
             print(f"- {lane} lane, seeds {', '.join(map(str, seeds))}: D minus {label}: "
                   f"{100 * (probe.mean() - base.mean()):+.1f} points [{100 * lo:+.1f}, {100 * hi:+.1f}] (95 %, "
                   f"{resampled} resampled, paired, {RESAMPLES:,} times)")
     if 1 in seeds:
-        lift = {lane: 100 * (matrix(runs, [f"{PROBE}-s1"], lane, order).mean()
-                             - matrix(runs, [f"{HOLD}-s1"], lane, order).mean()) for lane in LANES}
+        lift = {lane: 100 * (np.array(outcome_rows(runs, [f"{PROBE}-s1"], lane, order)).mean()
+                             - np.array(outcome_rows(runs, [f"{HOLD}-s1"], lane, order)).mean()) for lane in LANES}
         taken = lift["non-target"] >= 1.0 and lift["random"] >= -1.0
         print(f"\nThe rule on seed 1 (run.sh: achievement over the holding's seed 1 at least +1.0 from a non-target "
               f"lane and at least -1.0 from a random lane): {lift['non-target']:+.1f} and {lift['random']:+.1f}, "

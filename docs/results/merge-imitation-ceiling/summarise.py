@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from laneshift.tools.studies.outcome_files import (LANES, Outcomes, achievement_by_start_lane, read_outcomes,
+from laneshift.tools.studies.outcome_files import (LANES, achievement_by_start_lane, outcome_rows, read_outcomes,
                                                     write_outcomes_csv)
 from laneshift.tools.studies.stats import RESAMPLES, paired_difference_ci
 
@@ -31,10 +31,6 @@ NETWORKS = {"ceilA-s1": "A: the recipe's pre-training (TD + margin + cross-entro
 PUBLISHED = {"merge-pre60k-hold": "the published final networks with the holding (3 seeds pooled)",
              "merge-pre60k": "the published final networks without it (3 seeds pooled)"}
 
-
-def outcomes_matrix(runs: Outcomes, names: list[str], lane: str, order: list[int], key: str) -> np.ndarray:
-    """(runs, episodes) 0/1 array of ``key`` ('survived' or 'achieved') in ``order``'s episode seeds."""
-    return np.array([[getattr(runs[(r, lane)][e], key) for e in order] for r in names], float)
 
 
 def main(out: Path) -> None:
@@ -54,19 +50,19 @@ def main(out: Path) -> None:
           f"(episodes resampled, paired, {RESAMPLES:,} times).\n")
     print("| network | non-target lane | against the driver | random lane | against the driver |")
     print("|---|---|---|---|---|")
-    driver = {lane: outcomes_matrix(runs, ["driver"], lane, order, "achieved") for lane in LANES}
+    driver = {lane: np.array(outcome_rows(runs, ["driver"], lane, order, "achieved")) for lane in LANES}
     for name, members in groups.items():
         cells = []
         for lane in LANES:
-            surv = outcomes_matrix(runs, members, lane, order, "survived")
-            ach = outcomes_matrix(runs, members, lane, order, "achieved")
+            surv = np.array(outcome_rows(runs, members, lane, order, "survived"))
+            ach = np.array(outcome_rows(runs, members, lane, order, "achieved"))
             lo, hi = paired_difference_ci(ach, driver[lane])
             cells += [f"{100 * surv.mean():.1f} / **{100 * ach.mean():.1f}**",
                       f"{100 * (ach.mean() - driver[lane].mean()):+.1f} [{100 * lo:+.1f}, {100 * hi:+.1f}]"]
         print(f"| {labels[name]} | " + " | ".join(cells) + " |")
     cells = []
     for lane in LANES:
-        surv = outcomes_matrix(runs, ["driver"], lane, order, "survived")
+        surv = np.array(outcome_rows(runs, ["driver"], lane, order, "survived"))
         cells += [f"{100 * surv.mean():.1f} / {100 * driver[lane].mean():.1f}", ""]
     print("| the scripted driver behind the shield | " + " | ".join(cells) + " |")
     starts = sorted({o.start_lane for o in runs[("driver", "non-target")].values()})

@@ -4,7 +4,8 @@
 # steps, seeds 0-2; results/checkpoints/) and the scripted driver behind the same shield, on 800 FRESH validation
 # episodes per initial-lane setting (episode seeds 200,200-200,999, 300 steps): never used for any choice before (the
 # holding was chosen on 200,000-200,199, and the test episodes start at 100,000 and are not read here). Optional:
-# the stopped probes' seed-1 networks (EXTRA="name=path ..."); ONLY_EXTRA=1 drives those alone. Two evaluations at a time (the machine's 2 CPUs).
+# the stopped probes' seed-1 networks (EXTRA="name=path ..."); ONLY_EXTRA=1 drives those alone. Two evaluations at
+# a time (the machine's 2 CPUs).
 # From the repository's root:
 #   bash docs/results/merge-val800/run.sh OUT_DIR
 #   python docs/results/merge-val800/summarise.py OUT_DIR > docs/results/merge-val800/table.md

@@ -19,7 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from laneshift.tools.studies.outcome_files import LANES, achievement_by_start_lane, read_outcomes, write_outcomes_csv
+from laneshift.tools.studies.outcome_files import (LANES, achievement_by_start_lane, outcome_rows, read_outcomes,
+                                                    write_outcomes_csv)
 from laneshift.tools.studies.stats import RESAMPLES, paired_difference_ci
 
 RECIPES = {"merge-pre60k-hold": "with the holding (`actor.hold_mu=2`; published)",
@@ -61,7 +62,7 @@ def main(out: Path) -> None:
         arrays = {}
         for recipe in RECIPES:
             order = sorted(runs[(members[recipe][0], lane)])
-            arrays[recipe] = np.array([[runs[(r, lane)][e].achieved for e in order] for r in members[recipe]], float)
+            arrays[recipe] = np.array(outcome_rows(runs, members[recipe], lane, order))
         hold, base = arrays["merge-pre60k-hold"], arrays["merge-pre60k"]
         lo, hi = paired_difference_ci(hold, base)
         print(f"- {lane} lane: the holding's lift in achievement {100 * (hold.mean() - base.mean()):+.1f} points "
