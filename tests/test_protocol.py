@@ -241,6 +241,16 @@ def test_a_held_test_drives_validation_episodes_only_until_the_same_command_with
     assert "test_held" not in results and results["test"]["episode_seed"] == 100_000
     assert results["final_validation"]["test"]["episode_seed"] == VALIDATION_SEED
     assert "**Test held**" not in (out / "table.md").read_text()
+    # Judged again on fresh validation episodes (--final-validation-seed): those replace the kept ones, the
+    # drivers' first set kept beside the new.
+    fresh = VALIDATION_SEED + 1000
+    assert cli.main([*argv, "--final-validation-seed", str(fresh)]) == 0
+    assert driven == [VALIDATION_SEED, 100_000, fresh]
+    assert json.loads((out / "dqfd-s0.json").read_text())["final_validation"]["episode_seed"] == fresh
+    results = json.loads((out / "results.json").read_text())
+    assert results["final_validation"]["test"]["episode_seed"] == fresh and results["test"]["episode_seed"] == 100_000
+    assert f"seeds {fresh:,}-{fresh + 1:,}" in (out / "table.md").read_text()
+    assert (out / f"baselines-validation-{fresh}.json").is_file() and (out / "baselines-validation.json").is_file()
 
 
 def test_the_seed_bar_starts_at_the_share_a_stopped_run_made_before(tmp_path):
@@ -272,6 +282,7 @@ def test_bad_input_fails_before_any_run(tmp_path, capsys):
                          (["--set", "learner.lr=fast"], "learner.lr"), (["--road", "a/b"], "--road"),
                          (["--scenario", "allroads", "--set", "env.road=merge"], "leave env.road empty"),
                          (["--hold-test"], "give --final-validation-episodes"),
+                         (["--final-validation-seed", "199999"], "seeded from 200,000 up"),
                          (["--hold-test", "--final-validation-episodes", "2", "--publish", str(tmp_path / "pub")],
                           "published with its test table")):
         assert cli.main(["experiment", "protocol", "--out", str(tmp_path / "p"), *argv]) == 2

@@ -98,8 +98,8 @@ def protocol_args(args: argparse.Namespace, mode: str, shard: Path | None) -> ar
     return argparse.Namespace(
         scenario=args.scenario, method=MODES[mode], seeds=args.seeds, env_steps=args.env_steps, workers=args.workers,
         test_episodes=args.test_episodes, eval_max_steps=args.eval_max_steps, validation_every=args.validation_every,
-        validation_episodes=args.validation_episodes, final_validation_episodes=0, hold_test=False,
-        stability_target=args.stability_target,
+        validation_episodes=args.validation_episodes, final_validation_episodes=0,
+        final_validation_seed=protocol.VALIDATION_SEED, hold_test=False, stability_target=args.stability_target,
         out=str(Path(args.out) / mode), publish=None, road=None, config=args.config, set=list(args.set or []) + extra,
         baselines_dir=str(args.out))  # the modes share one test set: the drivers drive it once per study
 

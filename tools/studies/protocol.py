@@ -26,9 +26,11 @@ as ``DIR/<road>-<method>-seed<N>-final.safetensors`` with a ``.json`` beside it 
 revision, resolved config, test table and the ``laneshift eval`` commands that reproduce it).
 
 ``--final-validation-episodes N`` also evaluates each final network, and the drivers, on N
-validation episodes per initial-lane setting (seeds from 200,000; allroads: on each road): the
-numbers to choose between recipes or settings on, so that the test episodes serve no choice. The
-same command again with it adds them to seeds already done. ``--hold-test`` (a probe): each seed is
+validation episodes per initial-lane setting (seeds from 200,000, or from ``--final-validation-seed``; allroads:
+on each road): the numbers to choose between recipes or settings on, so that the test episodes serve no choice.
+The same command again with it adds them to seeds already done (again with another seed: replaces them).
+``--final-validation-seed S`` (at least 200,000) judges a probe on validation episodes that no earlier choice
+was made on: the episodes an earlier study chose on flatter what it chose. ``--hold-test`` (a probe): each seed is
 trained and its final network driven on those validation episodes only; the test episodes are not
 driven, so no test rate is printed or written while the choice is open; table.md and results.json hold
 the validation rates (``test_held``). The same command without ``--hold-test`` then drives the test
@@ -144,6 +146,9 @@ def plan(args: argparse.Namespace) -> tuple[Path, str, dict[int, RunConfig], dic
     if args.hold_test and args.publish:
         raise ConfigError("--hold-test: a network is published with its test table; publish with the command "
                           "that drives the test episodes (the same without --hold-test)")
+    if args.final_validation_seed < VALIDATION_SEED:
+        raise ConfigError(f"--final-validation-seed: validation episodes are seeded from {VALIDATION_SEED:,} up "
+                          f"(below are the test episodes'), got {args.final_validation_seed:,}")
     if TEST_SEED + args.test_episodes > VALIDATION_SEED:
         raise ConfigError(f"--test-episodes: at most {VALIDATION_SEED - TEST_SEED:,} (the test episodes' seeds "
                           f"from {TEST_SEED:,} would reach the validation episodes' from {VALIDATION_SEED:,})")
@@ -207,7 +212,7 @@ def run_seed(cfg: RunConfig, state: str, args: argparse.Namespace, out_dir: Path
     train_seed(cfg, state, out_dir, method)
     greedy = load_greedy_policy(run_checkpoint(run_dir))
     test_env = dataclasses.replace(cfg.env, max_steps=args.eval_max_steps)
-    final_validation = validate_final(greedy, test_env, args.final_validation_episodes,
+    final_validation = validate_final(greedy, test_env, args.final_validation_episodes, args.final_validation_seed,
                                       f"validate {method} seed {seed}")
     try:
         summary = json.loads((run_dir / "summary.json").read_text())
@@ -270,21 +275,22 @@ def evaluate_final(greedy: Policy, env_cfg: EnvConfig, episodes: int, episode_se
     return {"eval": evaluate_lanes(lambda env: greedy, env_cfg, episodes, episode_seed, progress=label)}
 
 
-def validate_final(greedy: Policy, env_cfg: EnvConfig, episodes: int, label: str) -> dict | None:
-    """A final network on ``episodes`` validation episodes per initial lane (allroads: on each road
-    too, as its test); None for 0 episodes."""
+def validate_final(greedy: Policy, env_cfg: EnvConfig, episodes: int, episode_seed: int, label: str) -> dict | None:
+    """A final network on ``episodes`` validation episodes per initial lane from ``episode_seed``
+    (allroads: on each road too, as its test); None for 0 episodes."""
     if not episodes:
         return None
-    return {"episode_seed": VALIDATION_SEED, "episodes_per_lane": episodes, "max_steps": env_cfg.max_steps,
-            **evaluate_final(greedy, env_cfg, episodes, VALIDATION_SEED, label)}
+    return {"episode_seed": episode_seed, "episodes_per_lane": episodes, "max_steps": env_cfg.max_steps,
+            **evaluate_final(greedy, env_cfg, episodes, episode_seed, label)}
 
 
 def add_final_validation(record_path: Path, cfg: RunConfig, args: argparse.Namespace) -> dict:
     """A done seed's record, with its final network's validation rates added (and written) where this
-    command asks for them and the record has none of that many episodes."""
+    command asks for them and the record has none of those episodes (that many, from that seed)."""
     record = json.loads(record_path.read_text())
-    episodes = args.final_validation_episodes
-    if not episodes or (record.get("final_validation") or {}).get("episodes_per_lane") == episodes:
+    episodes, first = args.final_validation_episodes, args.final_validation_seed
+    kept = record.get("final_validation") or {}
+    if not episodes or (kept.get("episodes_per_lane"), kept.get("episode_seed")) == (episodes, first):
         return record
     final = run_checkpoint(cfg.train.run_dir)
     if not final.is_file():
@@ -292,7 +298,7 @@ def add_final_validation(record_path: Path, cfg: RunConfig, args: argparse.Names
                           f"{final} is not there")
     greedy = load_greedy_policy(final)
     test_env = dataclasses.replace(cfg.env, max_steps=args.eval_max_steps)
-    record["final_validation"] = validate_final(greedy, test_env, episodes,
+    record["final_validation"] = validate_final(greedy, test_env, episodes, first,
                                                 f"validate {args.method} seed {cfg.train.seed}")
     write_json(record_path, record)
     return record
@@ -359,14 +365,16 @@ def run_protocol(args: argparse.Namespace) -> dict:
     baselines_dir = Path(getattr(args, "baselines_dir", None) or out_dir)
     baselines_dir.mkdir(parents=True, exist_ok=True)
     if args.final_validation_episodes:  # the drivers on the same validation episodes
-        validation_drivers = drivers_on(env_cfg, args.final_validation_episodes, baselines_dir, VALIDATION_SEED,
-                                        "baselines-validation")
+        first = args.final_validation_seed  # a file per first seed: each set of episodes kept beside the others
+        validation_drivers = drivers_on(env_cfg, args.final_validation_episodes, baselines_dir, first,
+                                        "baselines-validation" + ("" if first == VALIDATION_SEED else f"-{first}"))
     if args.hold_test:  # the validation rates where the test's would be; no test episode driven
         results = held_test_summary(args, road, runs, *validation_drivers)
     else:
         results = summarise(args, road, runs, *drivers_on(env_cfg, args.test_episodes, baselines_dir))
         if args.final_validation_episodes:
-            results["final_validation"] = final_validation_results(args, runs, *validation_drivers, VALIDATION_SEED)
+            results["final_validation"] = final_validation_results(args, runs, *validation_drivers,
+                                                                   args.final_validation_seed)
     results["command"] = command_line()
     write_json(out_dir / "results.json", results)
     table = render_table(results)
@@ -398,6 +406,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help=f"also evaluate each final network and the drivers on N validation episodes per initial "
                         f"lane (episode seeds from {VALIDATION_SEED:,}): the numbers to choose between recipes on "
                         f"(0 = off; again on a finished study: adds them)")
+    p.add_argument("--final-validation-seed", type=non_negative_int, default=VALIDATION_SEED, metavar="S",
+                   help=f"the first episode seed of --final-validation-episodes (default {VALIDATION_SEED:,}; at "
+                        f"least that): fresh validation episodes for a probe, that no earlier choice was made on")
     p.add_argument("--hold-test", action="store_true",
                    help="a probe: train and evaluate the final networks on the validation episodes only (needs "
                         "--final-validation-episodes); the test episodes are not driven until the same command "

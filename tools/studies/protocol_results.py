@@ -19,7 +19,7 @@ from laneshift.config import EnvConfig
 from laneshift.progress import write
 from laneshift.tools.studies import allroads
 from laneshift.tools.studies.evaluate import INITIAL_LANES, evaluate_lanes
-from laneshift.tools.studies.protocol_validation import (THRESHOLDS, VALIDATION_SEED, drop_noise, stability_drop,
+from laneshift.tools.studies.protocol_validation import (THRESHOLDS, drop_noise, stability_drop,
                                                         time_to_threshold, validation_table)
 from laneshift.tools.studies.provenance import write_json
 from laneshift.tools.studies.table2 import (HUMAN_LIKE_ROW, across_seeds, driven_rates, driver_cells,
@@ -123,8 +123,8 @@ def held_test_summary(args: argparse.Namespace, road: str, runs: list[dict], dri
     kept = ("eval", "eval_by_road")
     views = [{**{k: v for k, v in run.items() if k not in kept},
               **{k: v for k, v in run["final_validation"].items() if k in kept}} for run in runs]
-    episodes = runs[0]["final_validation"]["episodes_per_lane"]
-    return {**summarise(args, road, views, drivers, drivers_by_road, VALIDATION_SEED, episodes), "test_held": True}
+    first, episodes = (runs[0]["final_validation"][k] for k in ("episode_seed", "episodes_per_lane"))
+    return {**summarise(args, road, views, drivers, drivers_by_road, first, episodes), "test_held": True}
 
 
 def rates_summary(args: argparse.Namespace, runs: list[dict], drivers: dict[str, dict],
