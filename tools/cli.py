@@ -165,11 +165,12 @@ def _add_config(sub: Any) -> None:
 
 def _add_experiment(sub: Any) -> None:
     experiment = sub.add_parser("experiment", help="reproducible experiments (the paper's Table 2 comparison)")
-    from laneshift.tools.studies import (checkpoint_curve, experiments, lka_protocol, paper, protocol, reward_study,
-                                         sb3_baseline)
+    from laneshift.tools.studies import (checkpoint_curve, experiments, lka_protocol, paper, protocol,
+                                         published_curves, reward_study, sb3_baseline)
 
     which = experiment.add_subparsers(dest="experiment_cmd", required=True, metavar="WHICH")
-    for study in (experiments, protocol, lka_protocol, paper, checkpoint_curve, sb3_baseline, reward_study):
+    for study in (experiments, protocol, lka_protocol, paper, checkpoint_curve, sb3_baseline, reward_study,
+                  published_curves):
         study.register(which)
 
 
