@@ -89,7 +89,7 @@ def plot_published(directory: Path, agents: list[tuple[str, str]], out: Path, co
         for (field, c), color, what in zip(rates.items(), ("C0", "C1"), ("survival", "achievement")):
             ax.plot(c["x"], c["mean"], color=color, lw=1.5, label=what)
             ax.fill_between(c["x"], c["lo"], c["hi"], color=color, alpha=0.2, lw=0)
-        ax.set_title(f"{label} ({seeds} seed{'s' if seeds > 1 else ''}; {'/'.join(map(str, episodes))} episodes)",
+        ax.set_title(f"{label}\n({seeds} seed{'s' if seeds > 1 else ''}; {'/'.join(map(str, episodes))} episodes)",
                      fontsize=9)
         ax.set_ylim(max(0.0, 5 * (low // 5) - 5), 101)
         ax.set_xlabel("env steps", fontsize=8)
