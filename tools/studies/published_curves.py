@@ -13,6 +13,7 @@ Room: the tools (studies). May import: anything in laneshift, numpy, matplotlib.
 from __future__ import annotations
 
 import argparse
+import glob
 import json
 import re
 from pathlib import Path
@@ -39,7 +40,7 @@ def published_curves(directory: Path, name: str) -> dict[int, list[dict]]:
     """{seed: validation curve} of the networks published as ``<name>-seed<N>-final`` in ``directory``
     (ConfigError naming what is missing: no such network, or one published without a curve)."""
     curves = {}
-    for path in sorted(directory.glob(f"{glob_escape(name)}-seed*-final.json")):
+    for path in sorted(directory.glob(f"{glob.escape(name)}-seed*-final.json")):
         match = SEED_FILE.search(path.name)
         if match is None or path.name[:match.start()] != name:
             continue  # the glob's * took more than a seed: <name>-seed1-x-seed0-final.json is another name's
@@ -51,11 +52,6 @@ def published_curves(directory: Path, name: str) -> dict[int, list[dict]]:
     if not curves:
         raise ConfigError(f"{name}: no network published as {directory}/{name}-seed<N>-final.json")
     return curves
-
-
-def glob_escape(text: str) -> str:
-    """``text`` with glob's special characters matched literally."""
-    return re.sub(r"([*?\[])", r"[\1]", text)
 
 
 def plot_published(directory: Path, agents: list[tuple[str, str]], out: Path, columns: int = 3) -> Path:
