@@ -17,6 +17,19 @@ from laneshift.tools.studies.stats import curves_on_grid
 from laneshift.tools.studies.table2 import across_seeds
 
 
+def evaluations_on_grid(runs: list[list[dict]], field: str) -> dict[str, np.ndarray]:
+    """Several runs' greedy evaluations (each a list of ``{"env_steps", field: rate}``) as ``field`` in %
+    against env steps on one grid: :func:`curves_on_grid`'s mean and band over the runs."""
+    return curves_on_grid([np.asarray([e["env_steps"] for e in ev], dtype=float) for ev in runs],
+                          [np.asarray([100.0 * e[field] for e in ev]) for ev in runs])
+
+
+def draw_mean_band(ax, curve: dict[str, np.ndarray], color: str, label: str | None) -> None:
+    """A :func:`curves_on_grid` result on ``ax``: the mean over runs as a line, the band shaded."""
+    ax.plot(curve["x"], curve["mean"], color=color, lw=1.5, label=label)
+    ax.fill_between(curve["x"], curve["lo"], curve["hi"], color=color, alpha=0.2, lw=0)
+
+
 def moving_average(x: np.ndarray, window: int) -> np.ndarray:
     if len(x) < window:
         return np.cumsum(x) / np.arange(1, len(x) + 1)
@@ -137,9 +150,8 @@ def plot_curves(results: dict, out_dir: Path, window: int = 100, episodes: dict[
                 c = curves_on_grid(xs, ys)
                 if len(c["x"]) == 0:
                     continue
-                ax.plot(c["x"], c["mean"], color=color, lw=1.5,
-                        label=f"{method} ({len(runs)} seed{'s' if len(runs) > 1 else ''})" if ax is ax_r else None)
-                ax.fill_between(c["x"], c["lo"], c["hi"], color=color, alpha=0.2, lw=0)
+                draw_mean_band(ax, c, color,
+                               f"{method} ({len(runs)} seed{'s' if len(runs) > 1 else ''})" if ax is ax_r else None)
         ax_r.set_ylabel(f"return ({window}-episode moving average)")
         ax_l.set_ylabel(f"episode length (steps, {window}-episode m. a.)")
         ax_l.set_xlabel(xlabel)
@@ -179,13 +191,12 @@ def plot_eval_curves(results: dict, out_dir: Path, episodes: dict[str, dict], fi
     for method, runs in per_method.items():
         color = f"C{list(results['methods']).index(method)}"
         for ax, field in zip(axes, ("survival_rate", "achievement_rate")):
-            c = curves_on_grid([np.asarray([e["env_steps"] for e in ev], dtype=float) for ev in runs],
-                               [np.asarray([100.0 * e[field] for e in ev]) for ev in runs])
+            c = evaluations_on_grid(runs, field)
             if len(c["x"]) == 0:
                 continue
-            ax.plot(c["x"], c["mean"], color=color, lw=1.5,
-                    label=f"{method} ({len(runs)} seed{'s' if len(runs) > 1 else ''})" if field == "survival_rate" else None)
-            ax.fill_between(c["x"], c["lo"], c["hi"], color=color, alpha=0.2, lw=0)
+            draw_mean_band(ax, c, color,
+                           f"{method} ({len(runs)} seed{'s' if len(runs) > 1 else ''})" if field == "survival_rate"
+                           else None)
     n = sorted({e["episodes"] for runs in per_method.values() for ev in runs for e in ev})
     axes[0].set_ylabel("greedy survival (%)")
     axes[1].set_ylabel("greedy achievement (%)")

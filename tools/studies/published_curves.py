@@ -1,11 +1,11 @@
-"""``laneshift experiment curves``: the validation curves of published networks, one line per published
+"""``laneshift experiment curves``: the validation curves of published networks, a panel per published
 agent (the mean over its seeds with a 95 % bootstrap band over seeds), greedy survival and achievement
 against env steps. It reads only the JSON that ``experiment protocol --publish`` writes beside each
 network (``<dir>/<name>-seed<N>-final.json``: its ``validation`` curve), so the figure under
 docs/RESULTS.md's opening tables is drawn again from a fresh clone, without the run directories.
 
-    laneshift experiment curves straight=straight-imfade-dqfd-bc-alongside-safe-shield \\
-        merge=merge-pre60k-hold-dqfd-bc-alongside-gaps-safe-shield --out docs/img/current-curves.png
+    laneshift experiment curves "straight: imitation fading to 0=straight-imfade-dqfd-bc-alongside-safe-shield" \\
+        "merge: copy then hold=merge-copy-hold-dqfd-bc-alongside-gaps-safe-shield" --out docs/img/curves-shield.png
 
 Room: the tools (studies). May import: anything in laneshift, numpy, matplotlib.
 """
@@ -18,11 +18,10 @@ import json
 import re
 from pathlib import Path
 
-import numpy as np
-
 from laneshift.config import ConfigError
 from laneshift.progress import write
-from laneshift.tools.studies.stats import curves_on_grid
+from laneshift.tools.studies.plots import draw_mean_band, evaluations_on_grid
+from laneshift.tools.studies.protocol_validation import VALIDATION_SEED
 
 #: A published network's provenance file: ``<name>-seed<N>-final.json``.
 SEED_FILE = re.compile(r"-seed(\d+)-final\.json$")
@@ -57,7 +56,7 @@ def published_curves(directory: Path, name: str) -> dict[int, list[dict]]:
 def plot_published(directory: Path, agents: list[tuple[str, str]], out: Path, columns: int = 3) -> Path:
     """The figure ``out``: a panel per agent ((label, published name) each; ``columns`` panels a row),
     greedy survival and achievement against env steps, the mean over its seeds with a 95 % bootstrap
-    band over seeds (``stats.curves_on_grid``). Every curve is read before anything is drawn;
+    band over seeds (``plots.evaluations_on_grid``). Every curve is read before anything is drawn;
     ConfigError when a label is named twice or an agent's seeds share no two evaluations."""
     import matplotlib
 
@@ -71,9 +70,7 @@ def plot_published(directory: Path, agents: list[tuple[str, str]], out: Path, co
     drawn = {}
     for label, name in agents:
         runs = list(published_curves(directory, name).values())
-        x = [np.asarray([e["env_steps"] for e in c], dtype=float) for c in runs]
-        rates = {field: curves_on_grid(x, [np.asarray([100.0 * e[field] for e in c]) for c in runs])
-                 for field in ("survival_rate", "achievement_rate")}
+        rates = {field: evaluations_on_grid(runs, field) for field in ("survival_rate", "achievement_rate")}
         if len(rates["achievement_rate"]["x"]) < 2:
             raise ConfigError(f"{label}: its seeds share no two validation evaluations to draw")
         drawn[label] = (len(runs), sorted({e["episodes"] for c in runs for e in c}), rates)
@@ -82,9 +79,8 @@ def plot_published(directory: Path, agents: list[tuple[str, str]], out: Path, co
     # The panels share a y range from the lowest band down, so a reader compares heights across them.
     low = min(float(r[f]["lo"].min()) for _, _, r in drawn.values() for f in r)
     for ax, (label, (seeds, episodes, rates)) in zip(axes.flat, drawn.items()):
-        for (field, c), color, what in zip(rates.items(), ("C0", "C1"), ("survival", "achievement")):
-            ax.plot(c["x"], c["mean"], color=color, lw=1.5, label=what)
-            ax.fill_between(c["x"], c["lo"], c["hi"], color=color, alpha=0.2, lw=0)
+        for c, color, what in zip(rates.values(), ("C0", "C1"), ("survival", "achievement")):
+            draw_mean_band(ax, c, color, what)
         ax.set_title(f"{label}\n({seeds} seed{'s' if seeds > 1 else ''}; {'/'.join(map(str, episodes))} episodes)",
                      fontsize=9)
         ax.set_ylim(max(0.0, 5 * (low // 5) - 5), 101)
@@ -97,7 +93,8 @@ def plot_published(directory: Path, agents: list[tuple[str, str]], out: Path, co
         ax.set_visible(False)
     axes.flat[0].set_ylabel("greedy rate (%)", fontsize=8)
     axes.flat[0].legend(fontsize=8, loc="lower right")
-    fig.suptitle("validation evaluations during training (episode seeds 200,000+, the same every time): "
+    # The protocol's runs validate on its validation episodes (train.validation_seed), the same every time.
+    fig.suptitle(f"validation evaluations during training (episode seeds {VALIDATION_SEED:,}+, the same every time): "
                  "mean over seeds, 95 % bootstrap band over seeds", fontsize=10)
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -109,7 +106,7 @@ def plot_published(directory: Path, agents: list[tuple[str, str]], out: Path, co
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("curves", help="the validation curves of published networks (results/checkpoints), "
-                                             "one line per agent: mean and band over its seeds")
+                                             "a panel per agent: mean and band over its seeds")
     p.add_argument("agents", nargs="+", type=agent_arg, metavar="LABEL=NAME",
                    help="a published name (<name>-seed<N>-final.json in --published), with the legend's label")
     p.add_argument("--published", type=Path, default=Path("results/checkpoints"), metavar="DIR",
